@@ -1,0 +1,92 @@
+"""The sampling network: DGCNN features -> soft matching -> weighted SVD -> (mu0, sigma0).
+
+Architecture exactly as the reference (static-graph DGCNN from DCP, no transformer), so the five
+official checkpoints load into it (see :mod:`cemnet_ros.core.checkpoint` for the key mapping).
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from .geometry import matrix_to_euler, procrustes
+
+
+def knn_indices(points: torch.Tensor, k: int) -> torch.Tensor:
+    """(B, n, 3) -> (B, n, k) indices of each point's k nearest neighbours (itself included)."""
+    sq = (points * points).sum(-1)
+    neg_d2 = 2.0 * points @ points.transpose(1, 2) - sq.unsqueeze(2) - sq.unsqueeze(1)
+    return neg_d2.topk(k, dim=-1).indices
+
+
+def edge_features(points: torch.Tensor, k: int) -> torch.Tensor:
+    """(B, n, 3) -> (B, 6, n, k) edge features cat(neighbour, centre) of the static k-NN graph."""
+    b, n, _ = points.shape
+    idx = knn_indices(points, k)
+    neighbours = torch.gather(points.unsqueeze(1).expand(b, n, n, 3), 2, idx.unsqueeze(-1).expand(b, n, k, 3))
+    centres = points.unsqueeze(2).expand(b, n, k, 3)
+    return torch.cat((neighbours, centres), -1).permute(0, 3, 1, 2)
+
+
+class DGCNN(nn.Module):
+    """Per-point embedding: four edge convolutions (max over k after each), concatenated, then 1x1 conv."""
+
+    def __init__(self, emb_dims: int = 512, k: int = 20):
+        super().__init__()
+        self.k = k
+        widths = [(6, 64), (64, 64), (64, 128), (128, 256), (512, emb_dims)]
+        for i, (c_in, c_out) in enumerate(widths, start=1):
+            setattr(self, f"conv{i}", nn.Conv2d(c_in, c_out, kernel_size=1, bias=False))
+            setattr(self, f"bn{i}", nn.BatchNorm2d(c_out))
+
+    def forward(self, points: torch.Tensor, norm) -> torch.Tensor:
+        """(B, n, 3) -> (B, emb_dims, n). ``norm(bn, x)`` applies a BatchNorm layer (see SamplingNetwork)."""
+        x = edge_features(points, self.k)
+        pooled = []
+        for i in range(1, 5):
+            x = F.relu(norm(getattr(self, f"bn{i}"), getattr(self, f"conv{i}")(x)))
+            pooled.append(x.max(dim=-1, keepdim=True).values)
+        x = F.relu(norm(self.bn5, self.conv5(torch.cat(pooled, 1))))
+        return x.squeeze(-1)
+
+
+def feature_distances(src_emb: torch.Tensor, tgt_emb: torch.Tensor) -> torch.Tensor:
+    """(B, C, n), (B, C, m) -> (B, n, m) Euclidean distances between embeddings."""
+    d2 = (src_emb * src_emb).sum(1).unsqueeze(2) + (tgt_emb * tgt_emb).sum(1).unsqueeze(1) \
+        - 2.0 * src_emb.transpose(1, 2) @ tgt_emb
+    return d2.clamp_min(1e-12).sqrt()
+
+
+class SamplingNetwork(nn.Module):
+    """Predicts the CEM's initial Gaussian: mu0 = [z, y, x, tx, ty, tz] and sigma0 in (0, 1)^6."""
+
+    def __init__(self, emb_dims: int = 512, k: int = 20):
+        super().__init__()
+        self.embedding = DGCNN(emb_dims, k)
+        self.sigma_head = nn.Sequential(
+            nn.Linear(2 * emb_dims, emb_dims // 4), nn.BatchNorm1d(emb_dims // 4), nn.LeakyReLU(),
+            nn.Linear(emb_dims // 4, emb_dims // 8), nn.BatchNorm1d(emb_dims // 8), nn.LeakyReLU(),
+            nn.Linear(emb_dims // 8, 6),
+        )
+        # At inference, BatchNorm uses batch statistics (as the reference, which never calls eval())
+        # when True, else the running statistics. Training always uses batch statistics.
+        self.batch_stats_at_inference = False
+
+    def _norm(self, bn: nn.Module, x: torch.Tensor) -> torch.Tensor:
+        if self.training:
+            return bn(x)
+        if self.batch_stats_at_inference and (x.dim() > 2 or x.shape[0] > 1):
+            return F.batch_norm(x, None, None, bn.weight, bn.bias, True, 0.0, bn.eps)
+        return F.batch_norm(x, bn.running_mean, bn.running_var, bn.weight, bn.bias, False, 0.0, bn.eps)
+
+    def forward(self, source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """source (B, n, 3), target (B, m, 3) -> mu0 (B, 6), sigma0 (B, 6)."""
+        src_emb = self.embedding(source, self._norm)
+        tgt_emb = self.embedding(target, self._norm)
+        match = torch.softmax(-feature_distances(src_emb, tgt_emb), dim=2)  # (B, n, m)
+        rotation, translation = procrustes(source, match @ target)
+        mu0 = torch.cat([matrix_to_euler(rotation), translation], -1)
+        h = torch.cat([src_emb.max(dim=-1).values, tgt_emb.max(dim=-1).values], 1)  # = max over cat(src, tgt)
+        for layer in self.sigma_head:
+            h = self._norm(layer, h) if isinstance(layer, nn.BatchNorm1d) else layer(h)
+        return mu0, torch.sigmoid(h)

@@ -1,0 +1,150 @@
+"""High-level registration API: ``register(source, target)`` on numpy clouds of any size."""
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+import torch
+
+from .checkpoint import load_network
+from .config import RegistrationConfig
+from .engine import CEMNet
+from .geometry import euler_to_matrix_np, matrix_to_action_np
+from .scoring import consensus_fitness, refine_with_icp
+
+NETWORK_MIN_POINTS = 20  # the network's k-NN graph
+
+
+@dataclass
+class RegistrationResult:
+    """A rigid motion mapping the source onto the target: ``target ~= rotation @ source + translation``."""
+
+    rotation: np.ndarray  # (3, 3)
+    translation: np.ndarray  # (3,)
+    sigma: np.ndarray  # (6,) final CEM spread [z, y, x (rad), tx, ty, tz]: the pose uncertainty
+    mu: np.ndarray  # (6,) final mean action
+    mu0: np.ndarray  # (6,) initial mean (network, motion model or identity)
+    sigma0: np.ndarray  # (6,)
+    fitness: float  # max-consensus inlier score in [0, 1] at epsilon (1 = every point has a partner at 0)
+    runtime_s: float
+
+    @property
+    def transform(self) -> np.ndarray:
+        out = np.eye(4)
+        out[:3, :3] = self.rotation
+        out[:3, 3] = self.translation
+        return out
+
+
+def resolve_device(name: str) -> torch.device:
+    """"auto" -> CUDA when available, else CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def prepare_cloud(points: np.ndarray, n_points: int, rng: np.random.Generator, name: str, min_points: int
+                  ) -> np.ndarray:
+    """Validate an (n, 3) cloud, drop non-finite rows (with a warning) and sub-sample to ``n_points``."""
+    points = np.asarray(points)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"{name} must be an (n, 3) array, got shape {points.shape}")
+    if not np.issubdtype(points.dtype, np.number):
+        raise ValueError(f"{name} must be numeric, got dtype {points.dtype}")
+    finite = np.isfinite(points).all(1)
+    if not finite.all():
+        warnings.warn(f"{name}: dropped {int((~finite).sum())} of {len(points)} non-finite points", stacklevel=3)
+        points = points[finite]
+    if len(points) < min_points:
+        raise ValueError(f"{name} has {len(points)} finite points; at least {min_points} are needed")
+    if len(points) > n_points:
+        points = points[rng.choice(len(points), n_points, replace=False)]
+    return points.astype(np.float32)
+
+
+class Registrar:
+    """Holds the engine (and the network's weights) for repeated registrations."""
+
+    def __init__(self, config: RegistrationConfig | None = None):
+        self.config = config or RegistrationConfig()
+        self.device = resolve_device(self.config.device)
+        network = None
+        if self.config.prior == "network":
+            network = load_network(self.config.weights, self.config.allow_pickle)
+            network.batch_stats_at_inference = self.config.batchnorm == "batch"
+        self.engine = CEMNet(self.config.cem, network, self.config.prior_sigma).to(self.device).eval()
+
+    def _generator(self) -> torch.Generator | None:
+        if self.config.cem.seed is None:
+            return None
+        return torch.Generator(device=self.device).manual_seed(self.config.cem.seed)
+
+    @torch.no_grad()
+    def register_batch(self, source: torch.Tensor, target: torch.Tensor, mu0: torch.Tensor | None = None,
+                       sigma0: torch.Tensor | None = None, run_cem: bool = True) -> dict[str, np.ndarray]:
+        """Register B pairs of prepared clouds (B, n, 3), (B, m, 3); ``run_cem=False`` returns mu0 alone."""
+        source = source.to(self.device, torch.float32)
+        target = target.to(self.device, torch.float32)
+        if run_cem:
+            out = self.engine(source, target, mu0, sigma0, generator=self._generator())
+            mu, sigma, mu0, sigma0 = out.mu, out.sigma, out.mu0, out.sigma0
+        else:
+            if mu0 is None or sigma0 is None:
+                mu0, sigma0 = self.engine.initial_distribution(source, target)
+            mu, sigma = mu0, sigma0
+        mu_np = mu.double().cpu().numpy()
+        rotation = euler_to_matrix_np(mu_np[:, :3])
+        translation = mu_np[:, 3:].copy()
+        src_np, tgt_np = source.cpu().numpy(), target.cpu().numpy()
+        cem = self.config.cem
+        fitness = np.empty(len(mu_np))
+        for b in range(len(mu_np)):
+            if cem.refine_icp_steps > 0:
+                rotation[b], translation[b] = refine_with_icp(src_np[b], tgt_np[b], rotation[b], translation[b],
+                                                              cem.refine_icp_steps, cem.epsilon)
+                mu_np[b] = matrix_to_action_np(np.block([[rotation[b], translation[b][:, None]], [0, 0, 0, 1]]))
+            fitness[b] = consensus_fitness(src_np[b], tgt_np[b], rotation[b], translation[b], cem.epsilon)
+        return {"rotation": rotation, "translation": translation, "mu": mu_np,
+                "sigma": sigma.double().cpu().numpy(), "mu0": mu0.double().cpu().numpy(),
+                "sigma0": sigma0.double().cpu().numpy(), "fitness": fitness}
+
+    def register(self, source: np.ndarray, target: np.ndarray, prior_pose: Optional[np.ndarray] = None,
+                 prior_sigma: Optional[np.ndarray] = None) -> RegistrationResult:
+        """Register one pair of (n, 3) and (m, 3) clouds; ``prior_pose`` (4x4) replaces the network's mu0."""
+        start = time.perf_counter()
+        rng = np.random.default_rng(self.config.seed)
+        min_points = NETWORK_MIN_POINTS if prior_pose is None and self.config.prior == "network" else 3
+        src = prepare_cloud(source, self.config.n_points, rng, "source", min_points)
+        tgt = prepare_cloud(target, self.config.n_points, rng, "target", min_points)
+        mu0 = sigma0 = None
+        if prior_pose is not None:
+            prior_pose = np.asarray(prior_pose, dtype=np.float64)
+            if prior_pose.shape != (4, 4) or not np.isfinite(prior_pose).all():
+                raise ValueError(f"prior_pose must be a finite 4x4 matrix, got shape {prior_pose.shape}")
+            spread = self.config.prior_sigma if prior_sigma is None else prior_sigma
+            mu0 = torch.as_tensor(matrix_to_action_np(prior_pose), dtype=torch.float32)[None]
+            sigma0 = torch.as_tensor(np.asarray(spread, dtype=np.float64), dtype=torch.float32).reshape(1, 6)
+        out = self.register_batch(torch.from_numpy(src)[None], torch.from_numpy(tgt)[None], mu0, sigma0)
+        return RegistrationResult(out["rotation"][0], out["translation"][0], out["sigma"][0], out["mu"][0],
+                                  out["mu0"][0], out["sigma0"][0], float(out["fitness"][0]),
+                                  time.perf_counter() - start)
+
+
+_DEFAULT_REGISTRARS: dict[str, Registrar] = {}
+
+
+def register(source: np.ndarray, target: np.ndarray, config: RegistrationConfig | None = None, *,
+             prior_pose: Optional[np.ndarray] = None, prior_sigma: Optional[np.ndarray] = None
+             ) -> RegistrationResult:
+    """Register ``source`` onto ``target`` (any sizes; sub-sampled to ``config.n_points``).
+
+    The engine for a given config is built once and reused by later calls.
+    """
+    config = config or RegistrationConfig()
+    key = repr(config)
+    if key not in _DEFAULT_REGISTRARS:
+        _DEFAULT_REGISTRARS[key] = Registrar(config)
+    return _DEFAULT_REGISTRARS[key].register(source, target, prior_pose, prior_sigma)

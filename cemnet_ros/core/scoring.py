@@ -1,0 +1,92 @@
+"""Scores CEM candidates of a batch of pairs: the cost D^mc, optionally fused with the after-ICP cost.
+
+Two interchangeable back ends: numba grid kernels on the CPU (:mod:`.nn_grid`) and brute-force torch on
+CUDA. Scores never carry gradients (the reference detaches them as well).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+from . import nn_grid
+from .config import CEMConfig
+from .geometry import action_to_rt, procrustes, transform_points
+from .icp import batch_icp
+from .rewards import max_consensus_reward
+
+LATTICE_SPACING = 0.25  # CPU look-up lattice spacing, in units of epsilon
+
+
+class CandidateScorer:
+    """Costs of candidate actions (B, N, 6) for fixed source (B, n, 3) and target (B, m, 3) clouds."""
+
+    def __init__(self, source: torch.Tensor, target: torch.Tensor, cem: CEMConfig):
+        self.cem = cem
+        self.source, self.target = source.detach(), target.detach()
+        self.on_cpu = source.device.type == "cpu"
+        if self.on_cpu:
+            self._src_np = [np.ascontiguousarray(s, dtype=np.float64) for s in self.source.double().numpy()]
+            self._tgt_np = [np.ascontiguousarray(t, dtype=np.float64) for t in self.target.double().numpy()]
+            spacing = cem.epsilon * LATTICE_SPACING
+            self._src_grids = [nn_grid.build_grid(s, cem.epsilon, spacing).astuple() for s in self._src_np]
+            self._tgt_grids = [nn_grid.build_grid(t, cem.epsilon, spacing).astuple() for t in self._tgt_np]
+            self._icp_grids = [nn_grid.build_grid(t, cem.icp_radius, spacing).astuple() for t in self._tgt_np]
+
+    def cost(self, candidates: torch.Tensor, fused: bool) -> torch.Tensor:
+        """(B, N, 6) -> (B, N) cost 2 - reward; ``fused``: alpha * now + (1 - alpha) * after ICP."""
+        with torch.no_grad():
+            rot, trans = action_to_rt(candidates.detach().double())
+            reward = self._reward(rot, trans, icp=False)
+            if fused and self.cem.icp_steps > 0:
+                after = self._reward(rot, trans, icp=True)
+                reward = self.cem.alpha * reward + (1.0 - self.cem.alpha) * after
+        return (2.0 - reward).to(candidates.dtype)
+
+    def _reward(self, rot: torch.Tensor, trans: torch.Tensor, icp: bool) -> torch.Tensor:
+        if self.on_cpu:
+            return torch.from_numpy(np.stack([self._reward_cpu(b, rot[b].numpy(), trans[b].numpy(), icp)
+                                              for b in range(rot.shape[0])]))
+        return torch.stack([self._reward_torch(b, rot[b], trans[b], icp) for b in range(rot.shape[0])])
+
+    def _reward_cpu(self, b: int, rot: np.ndarray, trans: np.ndarray, icp: bool) -> np.ndarray:
+        rot, trans = np.ascontiguousarray(rot), np.ascontiguousarray(trans)
+        args = (self._src_np[b], self._tgt_np[b], self._tgt_grids[b], self._src_grids[b])
+        if icp:
+            return nn_grid.consensus_after_icp_batch(*args, self._icp_grids[b], rot, trans, self.cem.epsilon,
+                                                     self.cem.icp_radius, self.cem.icp_steps)
+        return nn_grid.consensus_batch(*args, rot, trans, self.cem.epsilon)
+
+    def _reward_torch(self, b: int, rot: torch.Tensor, trans: torch.Tensor, icp: bool) -> torch.Tensor:
+        src, tgt = self.source[b].double().unsqueeze(0), self.target[b].double().unsqueeze(0)
+        if icp:
+            rot, trans = batch_icp(src, tgt, rot, trans, self.cem.icp_steps, self.cem.icp_radius)
+        return max_consensus_reward(transform_points(src, rot, trans), tgt, self.cem.epsilon)
+
+
+def refine_with_icp(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
+                    steps: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Optional final point-to-point ICP refinement of one motion (exact k-d tree correspondences within radius)."""
+    tree = cKDTree(target)
+    source = torch.as_tensor(source, dtype=torch.float64)
+    for _ in range(steps):
+        dist, idx = tree.query(source.numpy() @ rotation.T + translation, distance_upper_bound=radius)
+        inliers = np.isfinite(dist)
+        if inliers.sum() < 3:
+            break
+        rot, trans = procrustes(source[inliers][None], torch.as_tensor(target[idx[inliers]], dtype=torch.float64)[None])
+        rotation, translation = rot[0].numpy(), trans[0].numpy()
+    return rotation, translation
+
+
+def consensus_fitness(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
+                      epsilon: float) -> float:
+    """Fitness in [0, 1]: the max-consensus reward of one motion divided by 2."""
+    src = np.ascontiguousarray(source, dtype=np.float64)
+    tgt = np.ascontiguousarray(target, dtype=np.float64)
+    spacing = epsilon * LATTICE_SPACING
+    reward = nn_grid.consensus_batch(src, tgt, nn_grid.build_grid(tgt, epsilon, spacing).astuple(),
+                                     nn_grid.build_grid(src, epsilon, spacing).astuple(),
+                                     np.ascontiguousarray(rotation, dtype=np.float64)[None],
+                                     np.ascontiguousarray(translation, dtype=np.float64)[None], epsilon)
+    return float(reward[0]) / 2.0

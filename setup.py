@@ -1,0 +1,52 @@
+"""ament_python package definition; also a plain pip-installable package with console scripts."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "cemnet_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    package_data={package_name: ["weights/*.npz", "weights/*.md"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "numpy>=1.24",
+        "scipy>=1.10",
+        "numba>=0.59",
+        # The CPU wheel is pinned in requirements.txt (torch==2.13.0); an unpinned install pulls a CUDA build.
+        "torch>=2.2",
+        "tqdm>=4.60",
+        "matplotlib>=3.7",
+        "rosbags>=0.10",
+        "mcap>=1.1",
+        "pyyaml>=6.0",
+    ],
+    extras_require={
+        "test": ["pytest>=7"],
+        "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
+        "open3d": ["open3d-cpu>=0.18"],
+    },
+    zip_safe=True,
+    maintainer="cemnet_ros maintainers",
+    maintainer_email="maintainers@cemnet-ros.invalid",
+    description="Online point cloud alignment with CEMNet for ROS 2",
+    license="MIT",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "align_node = cemnet_ros.ros.align_node:main",
+            "cemnet-register = cemnet_ros.tools.register_cli:main",
+            "cemnet-eval = cemnet_ros.tools.eval_cli:main",
+            "cemnet-bench = cemnet_ros.tools.bench_cli:main",
+            "cemnet-replay = cemnet_ros.tools.replay_cli:main",
+            "cemnet-train = cemnet_ros.tools.train_cli:main",
+        ],
+    },
+)

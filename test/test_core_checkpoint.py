@@ -1,0 +1,67 @@
+import numpy as np
+import pytest
+import torch
+
+from cemnet_ros.core.checkpoint import DEFAULT_WEIGHTS, CheckpointError, load_network, load_weights, save_weights
+from cemnet_ros.core.network import SamplingNetwork
+
+from shared_data import OFFICIAL_DIR, needs_shared
+
+
+def test_safe_format_round_trip(tmp_path):
+    net = SamplingNetwork()
+    path = save_weights(tmp_path / "w.npz", net.state_dict(), {"epoch": 3})
+    state, meta = load_weights(path)
+    assert meta == {"epoch": 3}
+    for key, value in net.state_dict().items():
+        torch.testing.assert_close(state[key], value)
+
+
+def test_safe_format_never_unpickles(tmp_path):
+    # An object array would need pickle; the loader must refuse rather than run it.
+    path = tmp_path / "evil.npz"
+    np.savez(path, **{"param/x": np.array([object()], dtype=object)})
+    with pytest.raises(CheckpointError):
+        load_weights(path)
+
+
+def test_pickles_need_explicit_opt_in(tmp_path):
+    path = tmp_path / "model.pth"
+    torch.save(SamplingNetwork().state_dict(), path)
+    with pytest.raises(CheckpointError, match="allow_pickle"):
+        load_weights(path)
+
+
+@pytest.mark.parametrize("content", [b"", b"not a zip file at all", b"PK\x03\x04garbage"])
+def test_corrupt_or_missing_files_raise_clear_errors(tmp_path, content):
+    path = tmp_path / "broken.npz"
+    path.write_bytes(content)
+    with pytest.raises(CheckpointError):
+        load_network(path)
+    with pytest.raises(CheckpointError, match="not found"):
+        load_network(tmp_path / "missing.npz")
+    other = tmp_path / "weights.txt"
+    other.write_text("x")
+    with pytest.raises(CheckpointError, match="format"):
+        load_network(other)
+
+
+def test_mismatched_weights_are_rejected(tmp_path):
+    path = save_weights(tmp_path / "small.npz", SamplingNetwork(emb_dims=64).state_dict())
+    with pytest.raises(CheckpointError, match="do not fit"):
+        load_network(path)
+
+
+def test_bundled_default_weights_load():
+    assert DEFAULT_WEIGHTS.is_file()
+    assert isinstance(load_network(None), SamplingNetwork)
+
+
+@needs_shared
+@pytest.mark.parametrize("name", sorted(p.name for p in OFFICIAL_DIR.glob("*.pth")) or ["none"])
+def test_all_official_checkpoints_load_strictly(name):
+    path = OFFICIAL_DIR / name
+    state, meta = load_weights(path, allow_pickle=True)
+    net = SamplingNetwork()
+    net.load_state_dict(state, strict=True)
+    assert meta["source"] == "official"

@@ -1,0 +1,38 @@
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from cemnet_ros.core.geometry import (action_to_matrix_np, euler_to_matrix, euler_to_matrix_np, matrix_to_action_np,
+                                      matrix_to_euler, procrustes, transform_points)
+
+
+def test_euler_convention_matches_scipy_zyx():
+    angles = np.array([[0.3, -0.2, 0.7], [1.2, 0.4, -2.0], [0.0, 0.0, 0.0]])
+    expected = Rotation.from_euler("zyx", angles).as_matrix()
+    np.testing.assert_allclose(euler_to_matrix_np(angles), expected, atol=1e-12)
+
+
+def test_matrix_to_euler_inverts_within_range():
+    rng = np.random.default_rng(0)
+    angles = rng.uniform([-np.pi, -np.pi / 2 + 0.01, -np.pi], [np.pi, np.pi / 2 - 0.01, np.pi], (100, 3))
+    back = matrix_to_euler(euler_to_matrix(torch.tensor(angles))).numpy()
+    np.testing.assert_allclose(back, angles, atol=1e-9)
+
+
+def test_action_matrix_round_trip():
+    action = np.array([0.1, -0.3, 0.5, 1.0, -2.0, 0.25])
+    np.testing.assert_allclose(matrix_to_action_np(action_to_matrix_np(action)), action, atol=1e-12)
+
+
+def test_procrustes_recovers_motion_and_never_reflects():
+    rng = np.random.default_rng(1)
+    src = torch.tensor(rng.standard_normal((2, 50, 3)))
+    rot = euler_to_matrix(torch.tensor([[0.4, 0.2, -0.3], [2.5, -1.0, 0.1]], dtype=torch.float64))
+    trans = torch.tensor([[0.1, 0.2, 0.3], [-1.0, 0.0, 2.0]], dtype=torch.float64)
+    r, t = procrustes(src, transform_points(src, rot, trans))
+    torch.testing.assert_close(r, rot)
+    torch.testing.assert_close(t, trans)
+    # A mirrored target must still give a proper rotation (det +1).
+    mirrored = src * torch.tensor([1.0, 1.0, -1.0], dtype=src.dtype)
+    r, _ = procrustes(src, mirrored)
+    np.testing.assert_allclose(torch.det(r).numpy(), 1.0, atol=1e-9)

@@ -1,0 +1,28 @@
+import numpy as np
+import torch
+
+from cemnet_ros.core.geometry import euler_to_matrix, transform_points
+from cemnet_ros.core.icp import batch_icp
+from cemnet_ros.core.scoring import refine_with_icp
+
+
+def test_batched_icp_recovers_small_motions(bracket):
+    src = torch.tensor(bracket[:512])
+    rot = euler_to_matrix(torch.tensor([[0.05, -0.03, 0.02], [-0.04, 0.02, 0.03]], dtype=torch.float64))
+    trans = torch.tensor([[0.02, -0.01, 0.03], [0.0, 0.03, -0.02]], dtype=torch.float64)
+    tgt = transform_points(src, rot[:1], trans[:1])  # motion 0 is the true one
+    eye = torch.eye(3, dtype=torch.float64).expand(2, 3, 3)
+    r, t = batch_icp(src[None], tgt, eye, torch.zeros(2, 3, dtype=torch.float64), steps=30)
+    torch.testing.assert_close(r[0], rot[0], atol=1e-6, rtol=0)
+    torch.testing.assert_close(t[0], trans[0], atol=1e-6, rtol=0)
+    assert torch.det(r).sub(1).abs().max() < 1e-9
+
+
+def test_cpu_icp_refinement_converges(bracket):
+    src = bracket[:512]
+    rot = euler_to_matrix(torch.tensor([0.04, 0.02, -0.03], dtype=torch.float64)).numpy()
+    trans = np.array([0.02, -0.02, 0.01])
+    tgt = src @ rot.T + trans
+    r, t = refine_with_icp(src, tgt, np.eye(3), np.zeros(3), steps=30, radius=0.2)
+    np.testing.assert_allclose(r, rot, atol=1e-6)
+    np.testing.assert_allclose(t, trans, atol=1e-6)

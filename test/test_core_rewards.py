@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+import torch
+
+from cemnet_ros.core import nn_grid
+from cemnet_ros.core.geometry import euler_to_matrix_np
+from cemnet_ros.core.losses import geman_mcclure_loss
+from cemnet_ros.core.rewards import chamfer_distance, max_consensus_distance, max_consensus_reward
+from cemnet_ros.core.scoring import LATTICE_SPACING
+
+
+def test_lemma_mc_equals_chamfer_over_epsilon_when_epsilon_covers_all_distances(bracket):
+    src = torch.tensor(bracket[:300])
+    tgt = torch.tensor(bracket[300:600]) + 0.01
+    eps = 10.0  # larger than every nearest-neighbour distance
+    torch.testing.assert_close(max_consensus_distance(src, tgt, eps), chamfer_distance(src, tgt) / eps)
+
+
+def test_mc_is_zero_for_identical_and_two_for_far_clouds(bracket):
+    pts = torch.tensor(bracket)
+    assert max_consensus_distance(pts, pts, 0.1).item() == pytest.approx(0.0, abs=1e-6)
+    assert max_consensus_distance(pts, pts + 100.0, 0.1).item() == pytest.approx(2.0)
+
+
+def test_mc_by_hand():
+    src = torch.tensor([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    tgt = torch.tensor([[0.05, 0.0, 0.0]])
+    # src->tgt: d = 0.05 (score 0.5), 0.95 (0); tgt->src: d = 0.05 (0.5). Reward 0.25 + 0.5.
+    assert max_consensus_reward(src, tgt, 0.1).item() == pytest.approx(0.75)
+
+
+def test_cpu_lattice_kernel_matches_brute_force(bracket):
+    rng = np.random.default_rng(0)
+    src, tgt = bracket[:768], bracket[256:1024]
+    eps = 0.1
+    rots = euler_to_matrix_np(rng.normal(0, 0.05, (64, 3)))
+    trans = rng.normal(0, 0.03, (64, 3))
+    grids = [nn_grid.build_grid(c, eps, eps * LATTICE_SPACING).astuple() for c in (tgt, src)]
+    fast = nn_grid.consensus_batch(src, tgt, grids[0], grids[1], rots, trans, eps)
+    moved = torch.tensor(src) @ torch.tensor(rots).transpose(1, 2) + torch.tensor(trans)[:, None]
+    exact = max_consensus_reward(moved, torch.tensor(tgt), eps).numpy()
+    np.testing.assert_allclose(fast, exact, atol=2e-3)
+    assert np.corrcoef(fast, exact)[0, 1] > 0.999
+
+
+def test_geman_mcclure_loss_properties(bracket):
+    pts = torch.tensor(bracket[:256])
+    assert geman_mcclure_loss(pts[None], pts[None]).item() == pytest.approx(0.0)
+    moved = (pts + 0.05).requires_grad_()
+    loss = geman_mcclure_loss(moved[None], pts[None], mu=0.01)
+    loss.backward()
+    assert loss.item() > 0 and moved.grad.abs().sum() > 0
+    # Bounded by 2 * mu however far apart (robust estimator).
+    assert geman_mcclure_loss((pts + 100)[None], pts[None], mu=0.01).item() <= 0.02 + 1e-9
