@@ -47,6 +47,7 @@ setup(
             "cemnet-bench = cemnet_ros.tools.bench_cli:main",
             "cemnet-replay = cemnet_ros.tools.replay_cli:main",
             "cemnet-train = cemnet_ros.tools.train_cli:main",
+            "cemnet-convert-weights = cemnet_ros.tools.convert_weights_cli:main",
         ],
     },
 )

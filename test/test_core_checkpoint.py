@@ -65,3 +65,19 @@ def test_all_official_checkpoints_load_strictly(name):
     net = SamplingNetwork()
     net.load_state_dict(state, strict=True)
     assert meta["source"] == "official"
+
+
+def test_convert_weights_cli_round_trip(tmp_path):
+    from cemnet_ros.tools.convert_weights_cli import main
+    pth = tmp_path / "official.pth"
+    net = SamplingNetwork()
+    # The official layout: keys under coarse_policy.emb_nn / coarse_policy.nn, plus the reflect buffer.
+    state = {("coarse_policy.emb_nn." + k[len("embedding."):]) if k.startswith("embedding.")
+             else ("coarse_policy.nn." + k[len("sigma_head."):]): v for k, v in net.state_dict().items()}
+    state["coarse_policy.reflect"] = torch.eye(3)
+    torch.save(state, pth)
+    assert main([str(pth), str(tmp_path / "out.npz")]) == 0
+    converted, _ = load_weights(tmp_path / "out.npz")
+    for key, value in net.state_dict().items():
+        torch.testing.assert_close(converted[key], value)
+    assert main([str(tmp_path / "missing.pth"), str(tmp_path / "x.npz")]) == 2

@@ -8,10 +8,10 @@ from cemnet_ros.core.network import SamplingNetwork, edge_features
 
 def test_edge_features_are_neighbour_then_centre():
     pts = torch.tensor([[[0.0, 0, 0], [1, 0, 0], [3, 0, 0]]])
-    feats = edge_features(pts, k=2)  # (1, 6, 3, 2)
+    feats = edge_features(pts, k=2)  # (1, 6, k=2, n=3)
     # Point 2's neighbours are itself and point 1.
-    neighbours = feats[0, :3, 2].T
-    centres = feats[0, 3:, 2].T
+    neighbours = feats[0, :3, :, 2].T
+    centres = feats[0, 3:, :, 2].T
     assert {tuple(v) for v in neighbours.tolist()} == {(3.0, 0, 0), (1.0, 0, 0)}
     assert (centres == torch.tensor([3.0, 0, 0])).all()
 

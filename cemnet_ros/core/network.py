@@ -20,12 +20,16 @@ def knn_indices(points: torch.Tensor, k: int) -> torch.Tensor:
 
 
 def edge_features(points: torch.Tensor, k: int) -> torch.Tensor:
-    """(B, n, 3) -> (B, 6, n, k) edge features cat(neighbour, centre) of the static k-NN graph."""
+    """(B, n, 3) -> (B, 6, k, n) edge features cat(neighbour, centre) of the static k-NN graph.
+
+    The neighbour axis comes before the point axis (the reference has (n, k)): the 1x1 convolutions do
+    not care, and the max over neighbours then runs over contiguous rows, several times faster on a CPU.
+    """
     b, n, _ = points.shape
     idx = knn_indices(points, k)
     neighbours = torch.gather(points.unsqueeze(1).expand(b, n, n, 3), 2, idx.unsqueeze(-1).expand(b, n, k, 3))
     centres = points.unsqueeze(2).expand(b, n, k, 3)
-    return torch.cat((neighbours, centres), -1).permute(0, 3, 1, 2)
+    return torch.cat((neighbours, centres), -1).permute(0, 3, 2, 1)
 
 
 class DGCNN(nn.Module):
@@ -45,9 +49,9 @@ class DGCNN(nn.Module):
         pooled = []
         for i in range(1, 5):
             x = F.relu(norm(getattr(self, f"bn{i}"), getattr(self, f"conv{i}")(x)))
-            pooled.append(x.max(dim=-1, keepdim=True).values)
+            pooled.append(x.amax(dim=2, keepdim=True))
         x = F.relu(norm(self.bn5, self.conv5(torch.cat(pooled, 1))))
-        return x.squeeze(-1)
+        return x.squeeze(2)
 
 
 def feature_distances(src_emb: torch.Tensor, tgt_emb: torch.Tensor) -> torch.Tensor:
@@ -86,7 +90,7 @@ class SamplingNetwork(nn.Module):
         match = torch.softmax(-feature_distances(src_emb, tgt_emb), dim=2)  # (B, n, m)
         rotation, translation = procrustes(source, match @ target)
         mu0 = torch.cat([matrix_to_euler(rotation), translation], -1)
-        h = torch.cat([src_emb.max(dim=-1).values, tgt_emb.max(dim=-1).values], 1)  # = max over cat(src, tgt)
+        h = torch.cat([src_emb.amax(dim=-1), tgt_emb.amax(dim=-1)], 1)  # = max over cat(src, tgt)
         for layer in self.sigma_head:
             h = self._norm(layer, h) if isinstance(layer, nn.BatchNorm1d) else layer(h)
         return mu0, torch.sigmoid(h)

@@ -15,7 +15,7 @@ def _box_surface(rng: np.random.Generator, n: int, lo: np.ndarray, hi: np.ndarra
 
 
 def bracket_shape(n_points: int = 2048, seed: int = 0) -> np.ndarray:
-    """(n, 3) points on an L-shaped bracket with a peg and a knob, centred and scaled into the unit sphere.
+    """(n, 3) float32 points on an L-shaped bracket with a peg and a knob, centred, scaled into the unit sphere.
 
     It has no rotational symmetry, so a registration of it has one right answer.
     """
@@ -31,4 +31,4 @@ def bracket_shape(n_points: int = 2048, seed: int = 0) -> np.ndarray:
     pts = np.concatenate([base, wall, peg, knob])
     pts -= pts.mean(0)
     pts /= np.linalg.norm(pts, axis=1).max()
-    return rng.permutation(pts)
+    return rng.permutation(pts).astype(np.float32)

@@ -1,0 +1,139 @@
+"""Classical baselines for the evaluation: point-to-point ICP and FPFH + RANSAC (+ ICP) via Open3D.
+
+Both return ``(R, t)`` with ``target ~= R @ source + t``. Open3D is an optional extra
+(``pip install open3d-cpu``; on Debian it also needs ``apt-get install libusb-1.0-0``): without it
+:func:`fpfh_ransac` raises :class:`BaselineUnavailable` with that advice.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Tuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+class BaselineUnavailable(RuntimeError):
+    """A baseline's optional dependency is missing."""
+
+
+@dataclass
+class ICPConfig:
+    """Point-to-point ICP from an initial guess (identity by default)."""
+
+    max_iterations: int = 50
+    tolerance: float = 1e-6  # stop when the mean correspondence distance improves by less than this
+    max_distance: Optional[float] = None  # ignore correspondences farther than this (None = keep all)
+
+
+@dataclass
+class FPFHConfig:
+    """FPFH + RANSAC + ICP refinement, scaled to unit-sphere objects."""
+
+    voxel_size: float = 0.05
+    normal_radius: float = 0.1
+    feature_radius: float = 0.25
+    ransac_distance: float = 0.075
+    ransac_iterations: int = 100_000
+    ransac_confidence: float = 0.999
+    icp_distance: float = 0.05  # max correspondence distance of the point-to-point refinement
+    icp_iterations: int = 50
+    seed: int = 0
+
+
+def _as_points(points: np.ndarray, name: str) -> np.ndarray:
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"{name} must be (n, 3), got {points.shape}")
+    if len(points) < 3:
+        raise ValueError(f"{name} needs >= 3 points, got {len(points)}")
+    if not np.isfinite(points).all():
+        raise ValueError(f"{name} has non-finite coordinates")
+    return points
+
+
+def kabsch(source: np.ndarray, target: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``R, t`` with ``target ~= R source + t`` for matched (n, 3) points (no reflection)."""
+    src_mean, tgt_mean = source.mean(0), target.mean(0)
+    cov = (source - src_mean).T @ (target - tgt_mean)
+    u, _, vt = np.linalg.svd(cov)
+    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T)) or 1.0])
+    rotation = vt.T @ fix @ u.T
+    return rotation, tgt_mean - rotation @ src_mean
+
+
+def icp(source: np.ndarray, target: np.ndarray, config: Optional[ICPConfig] = None,
+        init: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+    """Point-to-point ICP (nearest neighbours in ``target`` via a k-d tree, SVD update)."""
+    config = config or ICPConfig()
+    source, target = _as_points(source, "source"), _as_points(target, "target")
+    tree = cKDTree(target)
+    rotation, translation = np.eye(3), np.zeros(3)
+    if init is not None:
+        init = np.asarray(init, dtype=np.float64)
+        rotation, translation = init[:3, :3].copy(), init[:3, 3].copy()
+    previous = np.inf
+    for _ in range(config.max_iterations):
+        moved = source @ rotation.T + translation
+        distances, index = tree.query(moved)
+        keep = np.ones(len(moved), dtype=bool) if config.max_distance is None else distances <= config.max_distance
+        if keep.sum() < 3:
+            break
+        step_r, step_t = kabsch(moved[keep], target[index[keep]])
+        rotation, translation = step_r @ rotation, step_r @ translation + step_t
+        error = float(distances[keep].mean())
+        if previous - error < config.tolerance:
+            break
+        previous = error
+    return rotation, translation
+
+
+def open3d_available() -> bool:
+    """True when ``import open3d`` works."""
+    try:
+        import open3d  # noqa: F401
+    except Exception:  # ImportError, or OSError from a missing shared library (libusb)
+        return False
+    return True
+
+
+def _import_open3d():
+    try:
+        import open3d as o3d
+    except Exception as exc:
+        raise BaselineUnavailable(
+            f"the FPFH+RANSAC baseline needs Open3D, which cannot be imported ({exc}); install it with "
+            "'pip install open3d-cpu' (Debian also needs 'apt-get install libusb-1.0-0')") from None
+    return o3d
+
+
+def fpfh_ransac(source: np.ndarray, target: np.ndarray, config: Optional[FPFHConfig] = None
+                ) -> Tuple[np.ndarray, np.ndarray]:
+    """Global registration: FPFH features on voxel-downsampled clouds, RANSAC, then ICP on the full clouds."""
+    o3d = _import_open3d()
+    config = config or FPFHConfig()
+    source, target = _as_points(source, "source"), _as_points(target, "target")
+    reg = o3d.pipelines.registration
+    o3d.utility.random.seed(config.seed)
+
+    def features(pcd):
+        down = pcd.voxel_down_sample(config.voxel_size)
+        down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=config.normal_radius, max_nn=30))
+        fpfh = reg.compute_fpfh_feature(
+            down, o3d.geometry.KDTreeSearchParamHybrid(radius=config.feature_radius, max_nn=100))
+        return down, fpfh
+
+    src_full, tgt_full = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)) for p in (source, target))
+    (src_down, src_fpfh), (tgt_down, tgt_fpfh) = features(src_full), features(tgt_full)
+    ransac = reg.registration_ransac_based_on_feature_matching(
+        src_down, tgt_down, src_fpfh, tgt_fpfh, True, config.ransac_distance,
+        reg.TransformationEstimationPointToPoint(False), 3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
+         reg.CorrespondenceCheckerBasedOnDistance(config.ransac_distance)],
+        reg.RANSACConvergenceCriteria(config.ransac_iterations, config.ransac_confidence))
+    refined = reg.registration_icp(
+        src_full, tgt_full, config.icp_distance, ransac.transformation,
+        reg.TransformationEstimationPointToPoint(False),
+        reg.ICPConvergenceCriteria(max_iteration=config.icp_iterations))
+    transform = np.asarray(refined.transformation, dtype=np.float64)
+    return transform[:3, :3].copy(), transform[:3, 3].copy()

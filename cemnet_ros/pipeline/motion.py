@@ -1,0 +1,61 @@
+"""Constant-velocity motion model on SE(3) (as KISS-ICP): the next motion repeats the last one.
+
+The last relative motion is rescaled to the new time step through the SE(3) logarithm, so a dropped scan
+(twice the usual gap) predicts twice the motion.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+from scipy.linalg import expm, logm
+
+
+def se3_power(transform: np.ndarray, ratio: float) -> np.ndarray:
+    """``transform ** ratio`` on SE(3): the screw motion scaled by ``ratio`` (exp(ratio * log T))."""
+    if ratio == 1.0:
+        return np.array(transform, dtype=np.float64)
+    if ratio == 0.0:
+        return np.eye(4)
+    out = np.real(expm(ratio * np.real(logm(np.asarray(transform, dtype=np.float64)))))
+    out[3] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+class ConstantVelocity:
+    """Predicts the next pose from the last two (pose_{k-1} @ (T_{k-2,k-1}) ** (dt_k / dt_{k-1}))."""
+
+    def __init__(self, max_ratio: float = 5.0) -> None:
+        self.max_ratio = max_ratio
+        self.reset()
+
+    def reset(self) -> None:
+        self._poses: list[np.ndarray] = []
+        self._stamps: list[int] = []
+
+    @property
+    def has_velocity(self) -> bool:
+        return len(self._poses) == 2
+
+    @property
+    def last_pose(self) -> Optional[np.ndarray]:
+        return self._poses[-1] if self._poses else None
+
+    def update(self, pose: np.ndarray, stamp_ns: int) -> None:
+        """Record the pose estimated at ``stamp_ns`` (only the last two are kept)."""
+        self._poses = (self._poses + [np.array(pose, dtype=np.float64)])[-2:]
+        self._stamps = (self._stamps + [int(stamp_ns)])[-2:]
+
+    def predict_relative(self, stamp_ns: int) -> np.ndarray:
+        """Predicted T_prev_curr from the last recorded pose to the pose at ``stamp_ns`` (identity at start)."""
+        if not self.has_velocity:
+            return np.eye(4)
+        delta = np.linalg.inv(self._poses[0]) @ self._poses[1]
+        last_dt = self._stamps[1] - self._stamps[0]
+        ratio = 1.0 if last_dt <= 0 else (int(stamp_ns) - self._stamps[1]) / last_dt
+        return se3_power(delta, float(np.clip(ratio, 0.0, self.max_ratio)))
+
+    def predict(self, stamp_ns: int) -> np.ndarray:
+        """Predicted pose at ``stamp_ns`` (identity before any update)."""
+        last = self.last_pose
+        return (np.eye(4) if last is None else last) @ self.predict_relative(stamp_ns)

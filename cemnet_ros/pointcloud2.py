@@ -1,0 +1,141 @@
+"""Decode and encode sensor_msgs/PointCloud2 xyz without rclpy.
+
+Duck-typed on the message object, so it works with rclpy's ``sensor_msgs.msg.PointCloud2`` as well as the
+dataclasses of ``rosbags``: only the attributes ``height``, ``width``, ``fields`` (``name``, ``offset``,
+``datatype``, ``count``), ``is_bigendian``, ``point_step``, ``row_step`` and ``data`` are read.
+
+Integer x/y/z fields are rejected rather than converted: their unit (millimetres? raw ticks?) is not part of the
+message, so a silent cast would give plausible-looking but wrong geometry.
+"""
+from __future__ import annotations
+
+import array
+from dataclasses import dataclass
+from typing import Any, List, Tuple
+
+import numpy as np
+
+# sensor_msgs/PointField datatype constants.
+INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
+_FLOAT_TYPES = {FLOAT32: "f4", FLOAT64: "f8"}
+_TYPE_NAMES = {INT8: "INT8", UINT8: "UINT8", INT16: "INT16", UINT16: "UINT16", INT32: "INT32", UINT32: "UINT32",
+               FLOAT32: "FLOAT32", FLOAT64: "FLOAT64"}
+_SIZES = {INT8: 1, UINT8: 1, INT16: 2, UINT16: 2, INT32: 4, UINT32: 4, FLOAT32: 4, FLOAT64: 8}
+
+
+class CloudError(ValueError):
+    """A PointCloud2 that cannot be decoded; the message says why, ``kind`` names the problem for counters.
+
+    Kinds: ``empty``, ``missing_field``, ``field_type``, ``layout`` (point_step/row_step too small),
+    ``truncated`` and ``no_finite``.
+    """
+
+    def __init__(self, kind: str, message: str) -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass
+class CloudReport:
+    """What :func:`decode_xyz` found: total points in the message and how many were dropped as non-finite."""
+
+    n_total: int
+    n_valid: int
+    n_nonfinite: int
+
+
+@dataclass
+class EncodedCloud:
+    """The PointCloud2 payload for float32 x, y, z (little endian, unorganised, dense)."""
+
+    fields: List[Tuple[str, int, int, int]]  # (name, offset, datatype, count)
+    point_step: int
+    row_step: int
+    width: int
+    data: bytes
+
+
+def _as_bytes(data: Any) -> np.ndarray:
+    """``msg.data`` (bytes, array.array('B'), numpy uint8 or a list of ints) as a contiguous uint8 array."""
+    if isinstance(data, (bytes, bytearray, memoryview, array.array)):
+        return np.frombuffer(data, dtype=np.uint8)
+    return np.ascontiguousarray(np.asarray(data, dtype=np.uint8).reshape(-1))
+
+
+def decode_xyz(msg: Any) -> Tuple[np.ndarray, CloudReport]:
+    """Return the finite x, y, z of a PointCloud2 as an (n, 3) float64 array, plus a :class:`CloudReport`.
+
+    Handles any field offsets, point_step/row_step padding, float32/float64, either endianness and organised
+    clouds (height > 1) with NaN holes. Raises :class:`CloudError` when the cloud is empty, lacks x/y/z, has
+    non-float x/y/z, a point_step or row_step too small for its fields, data shorter than row_step * height, or
+    no finite point at all.
+    """
+    height, width = int(msg.height), int(msg.width)
+    point_step, row_step = int(msg.point_step), int(msg.row_step)
+    if height <= 0 or width <= 0:
+        raise CloudError("empty", f"empty cloud (height={height}, width={width})")
+    fields = {f.name: f for f in msg.fields}
+    missing = [name for name in "xyz" if name not in fields]
+    if missing:
+        raise CloudError("missing_field",
+                         f"cloud has no field(s) {', '.join(missing)} (fields: {sorted(fields) or 'none'})")
+    endian = ">" if msg.is_bigendian else "<"
+    layout = []
+    for name in "xyz":
+        f = fields[name]
+        if f.datatype not in _FLOAT_TYPES:
+            type_name = _TYPE_NAMES.get(f.datatype, f"unknown datatype {f.datatype}")
+            raise CloudError("field_type",
+                             f"field {name} is {type_name}; only FLOAT32/FLOAT64 coordinates are supported")
+        if int(f.offset) < 0 or int(f.offset) + _SIZES[f.datatype] > point_step:
+            raise CloudError("layout", f"point_step {point_step} is too small for field {name} at offset "
+                                       f"{f.offset} ({_SIZES[f.datatype]} bytes)")
+        layout.append((int(f.offset), np.dtype(endian + _FLOAT_TYPES[f.datatype])))
+    if row_step < width * point_step:
+        raise CloudError("layout",
+                         f"row_step {row_step} is smaller than width * point_step = {width * point_step}")
+    buf = _as_bytes(msg.data)
+    if len(buf) < row_step * height:
+        raise CloudError("truncated", f"truncated cloud: {len(buf)} bytes of data, expected row_step * height "
+                                      f"= {row_step * height}")
+    points = np.empty((height * width, 3), dtype=np.float64)
+    for axis, (offset, dtype) in enumerate(layout):
+        view = np.ndarray((height, width), dtype=dtype, buffer=buf, offset=offset, strides=(row_step, point_step))
+        points[:, axis] = view.reshape(-1)
+    finite = np.isfinite(points).all(axis=1)
+    n_valid = int(finite.sum())
+    report = CloudReport(n_total=height * width, n_valid=n_valid, n_nonfinite=height * width - n_valid)
+    if n_valid == 0:
+        raise CloudError("no_finite", f"cloud has no finite point ({report.n_total} non-finite)")
+    return (points if n_valid == len(points) else points[finite]), report
+
+
+def encode_xyz(points: np.ndarray) -> EncodedCloud:
+    """Pack (n, 3) points as float32 x, y, z little endian with a 12-byte point_step."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
+    data = pts.astype("<f4").tobytes()
+    return EncodedCloud(fields=[("x", 0, FLOAT32, 1), ("y", 4, FLOAT32, 1), ("z", 8, FLOAT32, 1)],
+                        point_step=12, row_step=12 * len(pts), width=len(pts), data=data)
+
+
+def make_pointcloud2(msg_cls: Any, field_cls: Any, points: np.ndarray, frame_id: str, stamp: Any,
+                     header_cls: Any = None) -> Any:
+    """Build a PointCloud2 of the given message classes holding ``points`` (float32 xyz).
+
+    Works with rclpy classes (``header_cls`` may be omitted) and with rosbags dataclasses (pass ``header_cls``,
+    the ``std_msgs/msg/Header`` class, because those have no default constructors).
+    """
+    enc = encode_xyz(points)
+    is_dataclass = hasattr(msg_cls, "__dataclass_fields__")
+    fields = [field_cls(name=n, offset=o, datatype=d, count=c) for n, o, d, c in enc.fields]
+    data = np.frombuffer(enc.data, dtype=np.uint8) if is_dataclass else enc.data
+    body = dict(height=1, width=enc.width, fields=fields, is_bigendian=False, point_step=enc.point_step,
+                row_step=enc.row_step, data=data, is_dense=True)
+    if header_cls is not None:
+        return msg_cls(header=header_cls(stamp=stamp, frame_id=frame_id), **body)
+    msg = msg_cls(**body)
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    return msg

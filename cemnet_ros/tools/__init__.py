@@ -1,0 +1,1 @@
+"""Command-line tools (console scripts): cemnet-eval, cemnet-bench, cemnet-register, ..."""

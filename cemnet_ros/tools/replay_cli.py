@@ -1,0 +1,297 @@
+"""cemnet-replay: run the scan pipeline (ScanAligner, sequential mode) over a rosbag2 bag offline, no DDS.
+
+Reads PointCloud2 scans (and ``/ground_truth`` PoseStamped/Odometry when present), aligns them at full speed and
+writes into ``--out``: ``replay.mcap`` (/cemnet/pose, /cemnet/odometry, /cemnet/aligned_cloud),
+``trajectory_tum.txt`` (+ ``ground_truth_tum.txt``), ``summary.json`` and ``replay.png``. Prints ATE/RPE
+against the ground truth, per-pair errors, latency and throughput.
+
+    cemnet-replay bags/kitti_00_6scans.mcap --out results/replay/kitti
+    cemnet-replay bags/synthetic_lidar.mcap --n-candidates 300 --n-iters 6 --limit 8
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+from cemnet_ros.io.atomic import atomic_write_text
+from cemnet_ros.replay.bag_io import BagError, BagReader, BagWriter
+from cemnet_ros.replay.trajectory import (absolute_trajectory_error, associate, relative_pose_errors,
+                                          write_tum)
+
+ODOM_FRAME = "odom"
+POSE_TOPIC, ODOM_TOPIC, CLOUD_TOPIC = "/cemnet/pose", "/cemnet/odometry", "/cemnet/aligned_cloud"
+
+# CLI override -> config field. Names are looked up in AlignerConfig, then RegistrationConfig, then CEMConfig.
+OVERRIDES = {
+    "prior": str, "n_candidates": int, "n_iters": int, "n_points": int, "scale": float, "voxel_size": float,
+    "refine_icp_steps": int, "refine_iters": int, "min_range": float, "max_range": float, "sampling": str,
+    "weights": str, "fitness_threshold": float, "seed": int,
+}
+
+
+# ---------------------------------------------------------------------------------------------- config
+def _apply(obj: Any, values: dict[str, Any], where: str) -> Any:
+    """dataclasses.replace with nested names resolved: AlignerConfig -> .registration -> .registration.cem."""
+    own = {f.name for f in fields(obj)}
+    mine = {k: v for k, v in values.items() if k in own and not dataclasses.is_dataclass(getattr(obj, k))}
+    rest = {k: v for k, v in values.items() if k not in mine}
+    nested = {}
+    for f in fields(obj):
+        child = getattr(obj, f.name)
+        if dataclasses.is_dataclass(child):
+            sub = dict(rest.pop(f.name, {}) or {})
+            names = _all_names(child)
+            sub.update({k: rest.pop(k) for k in list(rest) if k in names})
+            if sub:
+                nested[f.name] = _apply(child, sub, f"{where}.{f.name}")
+    if rest:
+        raise ValueError(f"unknown {where} parameter(s): {sorted(rest)}")
+    for k, v in mine.items():
+        if isinstance(getattr(obj, k), tuple) and isinstance(v, list):
+            mine[k] = tuple(v)
+    return dataclasses.replace(obj, **mine, **nested)
+
+
+def _all_names(obj: Any) -> set[str]:
+    names = set()
+    for f in fields(obj):
+        names.add(f.name)
+        child = getattr(obj, f.name)
+        if dataclasses.is_dataclass(child):
+            names |= _all_names(child)
+    return names
+
+
+def load_params(path: Optional[Path]) -> dict[str, Any]:
+    """Parameters from a YAML file: a flat mapping or ROS style ``<node>: {ros__parameters: {...}}``."""
+    if path is None:
+        return {}
+    data = yaml.safe_load(Path(path).read_text()) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a mapping of parameters")
+    for value in data.values():  # ROS 2 parameter file: the first node's ros__parameters
+        if isinstance(value, dict) and "ros__parameters" in value:
+            data = value["ros__parameters"]
+            break
+    # ROS parameter files flatten nested names with dots (registration.cem.n_iters) or use plain names.
+    flat: dict[str, Any] = {}
+    for key, value in data.items():
+        flat[str(key).split(".")[-1]] = value
+    return flat
+
+
+def build_config(params: dict[str, Any]):
+    """AlignerConfig from flat parameter names, mapped as align_node does (node-only names are ignored)."""
+    from cemnet_ros.pipeline.aligner import AlignerConfig
+
+    base = AlignerConfig()
+    known = _all_names(base)
+    values = {k: v for k, v in params.items() if k in known}
+    if values.get("weights") == "":  # ROS parameter files cannot hold None: '' = package weights
+        values["weights"] = None
+    if "n_iters" in values and "n_fused_iters" not in values:  # as align_node: --n-iters 2 alone stays valid
+        values["n_fused_iters"] = min(base.registration.cem.n_fused_iters, int(values["n_iters"]))
+    return _apply(base, values, "AlignerConfig")
+
+
+# ---------------------------------------------------------------------------------------------- replay
+@dataclass
+class ReplayResult:
+    """Everything the report and the JSON summary need."""
+
+    stamps_ns: list[int] = field(default_factory=list)
+    poses: list[np.ndarray] = field(default_factory=list)
+    steps: list[dict] = field(default_factory=list)  # per processed scan: fitness, accepted, reason, ...
+    rejected: list[dict] = field(default_factory=list)  # scans the pipeline refused (ScanRejected)
+    wall_s: float = 0.0
+
+
+def run_replay(reader: BagReader, aligner, out_bag: Path, limit: Optional[int], progress: bool) -> ReplayResult:
+    """Feed every scan to the aligner and write the result bag (atomically)."""
+    total = reader.info.n_clouds if limit is None else min(limit, reader.info.n_clouds)
+    result = ReplayResult()
+    start = time.perf_counter()
+    with BagWriter(out_bag, overwrite=True) as bag, tqdm(total=total, unit="scan", disable=not progress,
+                                                          desc="replay") as bar:
+        for i, frame in enumerate(reader.clouds(limit)):
+            try:
+                step = aligner.process(frame.points, frame.stamp_ns)
+            except ValueError as err:  # ScanRejected (too few points, ...) or a cloud the core refuses
+                result.rejected.append({"index": i, "stamp_ns": frame.stamp_ns, "reason": str(err)})
+                bar.update()
+                continue
+            sensor = frame.frame_id or "sensor"
+            bag.write_pose(POSE_TOPIC, step.pose, ODOM_FRAME, step.stamp_ns)
+            bag.write_odometry(ODOM_TOPIC, step.pose, step.covariance, ODOM_FRAME, sensor, step.stamp_ns)
+            aligned = frame.points @ step.pose[:3, :3].T + step.pose[:3, 3]
+            bag.write_cloud(CLOUD_TOPIC, aligned, ODOM_FRAME, step.stamp_ns)
+            result.stamps_ns.append(step.stamp_ns)
+            result.poses.append(step.pose)
+            result.steps.append({"index": i, "stamp_ns": step.stamp_ns, "fitness": step.fitness,
+                                 "accepted": step.accepted, "reason": step.reason, "latency_s": step.latency_s,
+                                 "n_points": step.n_points, "first": step.relative is None})
+            bar.update()
+    result.wall_s = time.perf_counter() - start
+    return result
+
+
+def evaluate(result: ReplayResult, gt_stamps: np.ndarray, gt_poses: np.ndarray) -> Optional[dict]:
+    """ATE/RPE of the estimate against the ground truth at matching stamps (None without ground truth)."""
+    if len(gt_stamps) == 0 or not result.poses:
+        return None
+    period = np.median(np.diff(gt_stamps)) if len(gt_stamps) > 1 else 1e8
+    match = associate(result.stamps_ns, gt_stamps, max_dt_ns=int(max(period * 0.25, 1e6)))
+    pairs = [(k, j) for k, j in enumerate(match) if j is not None]
+    if len(pairs) < 1:
+        return {"matched": 0, "error": "no scan stamp matches a ground-truth stamp"}
+    est = np.stack([result.poses[k] for k, _ in pairs])
+    gt = np.stack([gt_poses[j] for _, j in pairs])
+    ate = absolute_trajectory_error(est, gt)
+    rpe = relative_pose_errors(est, gt)
+    per_pair = [{"pair": f"{result.steps[pairs[p][0]]['index']}->{result.steps[pairs[p + 1][0]]['index']}",
+                 "trans_m": float(rpe.trans_errors[p]), "rot_deg": float(rpe.rot_errors_deg[p]),
+                 "fitness": result.steps[pairs[p + 1][0]]["fitness"],
+                 "accepted": result.steps[pairs[p + 1][0]]["accepted"]}
+                for p in range(len(pairs) - 1)]
+    return {"matched": len(pairs), "ate": {"rmse_m": ate.rmse, "mean_m": ate.mean, "median_m": ate.median,
+                                           "max_m": ate.max},
+            "rpe": rpe.stats(), "per_pair": per_pair, "_aligned": ate.alignment, "_est": est, "_gt": gt,
+            "_rpe": rpe}
+
+
+def speed(result: ReplayResult) -> dict:
+    lat = np.array([s["latency_s"] for s in result.steps], dtype=np.float64)
+    # The first scan only sets the reference (no registration): keep it out of the latency figures.
+    reg = np.array([s["latency_s"] for s in result.steps if not s["first"]], dtype=np.float64)
+    busy = float(lat.sum())
+    return {"latency_p50_s": float(np.percentile(reg, 50)) if reg.size else float("nan"),
+            "latency_p95_s": float(np.percentile(reg, 95)) if reg.size else float("nan"),
+            "latency_max_s": float(reg.max()) if reg.size else float("nan"),
+            "throughput_scans_per_s": len(lat) / busy if busy > 0 else float("nan"),
+            "wall_s": result.wall_s}
+
+
+def format_report(bag: str, summary: dict, max_pairs: int = 20, worst: int = 10) -> str:
+    lines = [f"bag: {bag}  ({summary['cloud_topic']}, {summary['scans']} scans, "
+             f"scale {summary['scale_m_per_unit']:.3f} m/unit)"]
+    acc = summary.get("accuracy")
+    if acc and "ate" in acc:
+        ate, rpe = acc["ate"], acc["rpe"]
+        lines.append(f"ATE RMSE: {ate['rmse_m'] * 100:.2f} cm (max {ate['max_m'] * 100:.2f} cm, "
+                     f"{acc['matched']} poses matched to ground truth)")
+        lines.append(f"RPE translation: mean {rpe['trans_mean_m'] * 100:.2f} cm, "
+                     f"median {rpe['trans_median_m'] * 100:.2f} cm, max {rpe['trans_max_m'] * 100:.2f} cm")
+        lines.append(f"RPE rotation:    mean {rpe['rot_mean_deg']:.3f} deg, median {rpe['rot_median_deg']:.3f} deg, "
+                     f"max {rpe['rot_max_deg']:.3f} deg")
+        pairs = acc["per_pair"]
+        shown = pairs if len(pairs) <= max_pairs else sorted(pairs, key=lambda p: -p["trans_m"])[:worst]
+        lines.append("per-pair errors" + ("" if len(pairs) <= max_pairs else f" ({worst} worst of {len(pairs)})")
+                     + ": pair  trans[cm]  rot[deg]  fitness")
+        lines += [f"  {p['pair']:>7}  {p['trans_m'] * 100:8.2f}  {p['rot_deg']:8.3f}  {p['fitness']:.3f}"
+                  + ("" if p["accepted"] else "  FLAGGED") for p in shown]
+    elif acc:
+        lines.append(f"ground truth present but unusable: {acc['error']}")
+    else:
+        lines.append("no ground truth in the bag: speed only")
+    sp = summary["speed"]
+    lines.append(f"latency p50 {sp['latency_p50_s'] * 1e3:.0f} ms, p95 {sp['latency_p95_s'] * 1e3:.0f} ms; "
+                 f"throughput {sp['throughput_scans_per_s']:.2f} scans/s (wall {sp['wall_s']:.1f} s)")
+    lines.append(f"rejected scans: {len(summary['rejected'])}; flagged steps: {len(summary['flagged'])}")
+    lines += [f"  scan {r['index']}: {r['reason']}" for r in summary["rejected"] + summary["flagged"]]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------- CLI
+def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="cemnet-replay", description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("bag", type=Path, help="rosbag2 directory or .mcap/.db3 file")
+    p.add_argument("--out", type=Path, default=None, help="output directory (default: results/replay/<bag name>)")
+    p.add_argument("--topic", default=None, help="PointCloud2 topic (default: the bag's only PointCloud2 topic)")
+    p.add_argument("--gt-topic", default=None, help="ground-truth PoseStamped/Odometry topic (default: "
+                                                    "/ground_truth when present)")
+    p.add_argument("--config", type=Path, default=None, help="parameter YAML (e.g. config/align_node.yaml); "
+                                                             "the options below override it")
+    p.add_argument("--limit", type=int, default=None, help="process only the first N scans")
+    p.add_argument("--no-plot", action="store_true", help="skip the PNG")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    for name, typ in OVERRIDES.items():
+        p.add_argument("--" + name.replace("_", "-"), type=typ, default=None, dest=name)
+    args = p.parse_args(argv)
+    if args.limit is not None and args.limit < 1:
+        p.error("--limit must be >= 1")
+    return args
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = parse_args(argv)
+    try:
+        params = load_params(args.config)
+        params.update({k: getattr(args, k) for k in OVERRIDES if getattr(args, k) is not None})
+        config = build_config(params)
+    except (OSError, ValueError, TypeError, yaml.YAMLError) as err:
+        print(f"cemnet-replay: bad configuration: {err}", file=sys.stderr)
+        return 2
+    out = args.out or Path("results") / "replay" / args.bag.name.split(".")[0]
+    try:
+        reader = BagReader(args.bag, topic=args.topic, gt_topic=args.gt_topic)
+    except BagError as err:
+        print(f"cemnet-replay: {err}", file=sys.stderr)
+        return 2
+    from cemnet_ros.pipeline.aligner import ScanAligner
+
+    out.mkdir(parents=True, exist_ok=True)
+    with reader:
+        try:
+            gt_stamps, gt_poses, gt_frame = reader.ground_truth()
+            aligner = ScanAligner(config)
+            result = run_replay(reader, aligner, out / "replay.mcap", args.limit, progress=not args.quiet)
+        except BagError as err:
+            print(f"cemnet-replay: {err}", file=sys.stderr)
+            return 2
+        info = reader.info
+    if not result.poses:
+        print(f"cemnet-replay: no scan could be processed ({len(result.rejected)} rejected)", file=sys.stderr)
+        return 1
+    acc = evaluate(result, gt_stamps, gt_poses)
+    files = {"bag": str(out / "replay.mcap"), "tum": str(write_tum(out / "trajectory_tum.txt",
+                                                                  result.stamps_ns, result.poses))}
+    if len(gt_stamps):
+        files["ground_truth_tum"] = str(write_tum(out / "ground_truth_tum.txt", gt_stamps, gt_poses))
+    if not args.no_plot:
+        from cemnet_ros.replay.plot import save_replay_plot
+
+        if acc and "ate" in acc:
+            est = np.einsum("ij,njk->nik", acc["_aligned"], acc["_est"])
+            save_replay_plot(out / "replay.png", est, acc["_gt"], acc["_rpe"], title=args.bag.name)
+        else:
+            save_replay_plot(out / "replay.png", np.stack(result.poses), title=args.bag.name)
+        files["plot"] = str(out / "replay.png")
+    summary = {
+        "bag": str(args.bag), "cloud_topic": info.cloud_topic, "gt_topic": info.gt_topic, "gt_frame": gt_frame,
+        "scans": len(result.steps), "scale_m_per_unit": float(aligner.scale or float("nan")),
+        "accuracy": None if acc is None else {k: v for k, v in acc.items() if not k.startswith("_")},
+        "speed": speed(result), "rejected": result.rejected,
+        "flagged": [{"index": s["index"], "reason": s["reason"]} for s in result.steps
+                    if not s["accepted"] or s["reason"]],
+        "steps": result.steps, "config": asdict(config), "outputs": files,
+    }
+    files["summary"] = str(out / "summary.json")
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float) + "\n")
+    print(format_report(str(args.bag), summary))
+    print(f"outputs: {out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,184 @@
+#!/usr/bin/env python3
+"""Sustained-rate benchmark: KITTI-size scans (~124k points) fed at 10 Hz through the node's pipeline.
+
+A producer thread submits scans into the pipeline's bounded worker queue (``BoundedWorker``, as align_node
+does) on a fixed clock; the worker runs ``ScanAligner.process`` with default parameters. Reports the sustained
+processing rate, latency (submit -> result) p50/p95, drops, and whether it kept up. The same stream then goes
+through a plain point-to-point ICP pipeline (same queue, same voxel grid) as a baseline measured in this run.
+
+Scans: the 6 real KITTI Velodyne scans from ../shared when present (played forwards and backwards so that
+consecutive scans stay neighbours), else ray-cast synthetic 64-beam scans of the same size.
+
+    python scripts/bench_throughput.py --duration 30
+    python -m scripts.bench_throughput --duration 60 --rate 10 --no-baseline
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
+    sys.path.insert(0, str(REPO))
+
+from cemnet_ros.pipeline.worker import BoundedWorker  # noqa: E402
+
+KITTI = REPO.parent / "shared" / "data" / "kitti_sample" / "velodyne"
+
+
+def kitti_scans() -> list[np.ndarray]:
+    return [np.fromfile(p, dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64)
+            for p in sorted(KITTI.glob("*.bin"))]
+
+
+def synthetic_scans(n: int = 6) -> list[np.ndarray]:
+    """HDL-64-like scans (~124k points) of the synthetic courtyard along its smooth path."""
+    from scripts.make_bags import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory
+
+    lidar = LidarModel(n_beams=64, n_azimuth=1940, elevation_deg=(-24.8, 2.0))
+    scene, rng = courtyard_scene(), np.random.default_rng(0)
+    return [lidar_scan(scene, pose, lidar, rng).astype(np.float64) for pose in synthetic_trajectory(n)]
+
+
+def ping_pong(n: int):
+    """0, 1, ..., n-1, n-2, ..., 1, 0, 1, ...: consecutive items are always neighbours."""
+    order = list(range(n)) + list(range(n - 2, 0, -1)) if n > 1 else [0]
+    while True:
+        yield from order
+
+
+@dataclass
+class BenchResult:
+    """Counts over the whole run; rate and latency over the steady state (the stream, not the final drain)."""
+
+    name: str
+    submitted: int
+    processed: int
+    errors: int
+    drops: int
+    stream_s: float
+    done_in_stream: int  # results finished while the producer was still running
+    latencies_s: list[float] = field(default_factory=list)  # submit -> result, items started during the stream
+
+    @property
+    def rate_hz(self) -> float:
+        return self.done_in_stream / self.stream_s
+
+    def summary(self, target_hz: float) -> str:
+        lat = np.asarray(self.latencies_s) * 1e3
+        p50, p95 = (np.percentile(lat, 50), np.percentile(lat, 95)) if lat.size else (np.nan, np.nan)
+        kept_up = self.drops == 0 and self.rate_hz >= 0.95 * target_hz
+        return (f"{self.name:>8}: {self.rate_hz:.2f} scans/s sustained over {self.stream_s:.0f} s "
+                f"({self.processed}/{self.submitted} processed incl. drain); latency p50 {p50:.0f} ms, "
+                f"p95 {p95:.0f} ms; drops {self.drops}; errors {self.errors}; kept up with {target_hz:g} Hz: "
+                f"{'YES' if kept_up else 'NO'}")
+
+
+def run_stream(name: str, process: Callable[[np.ndarray, int], None], scans: list[np.ndarray], rate_hz: float,
+               duration_s: float, queue_size: int) -> BenchResult:
+    """Submit scans at ``rate_hz`` for ``duration_s`` into a BoundedWorker running ``process``; then drain."""
+    records: list[tuple[float, float, float]] = []  # (submitted, started, done), monotonic seconds
+
+    def handle(item):
+        submitted, points, stamp_ns = item
+        started = time.monotonic()
+        process(points, stamp_ns)
+        records.append((submitted, started, time.monotonic()))
+
+    worker = BoundedWorker(handle, maxsize=queue_size, name=f"bench-{name}")
+    submitted = 0
+    stop = threading.Event()
+
+    def producer():
+        nonlocal submitted
+        period, start, order = 1.0 / rate_hz, time.monotonic(), ping_pong(len(scans))
+        while not stop.is_set():
+            due = start + submitted * period
+            if due - start >= duration_s:
+                return
+            time.sleep(max(0.0, due - time.monotonic()))
+            worker.submit((time.monotonic(), scans[next(order)], int(1e18) + int(submitted * period * 1e9)))
+            submitted += 1
+
+    start = time.monotonic()
+    thread = threading.Thread(target=producer, name="bench-producer", daemon=True)
+    thread.start()
+    try:
+        thread.join()
+        end = time.monotonic()
+        worker.wait_idle(timeout=120.0)  # drain: queued scans then wait for their predecessors, not realistic
+    finally:
+        stop.set()
+        worker.close()
+    stats = worker.stats()
+    return BenchResult(name, submitted, stats.processed, stats.errors, stats.drops, end - start,
+                       sum(1 for _, _, done in records if done <= end),
+                       [done - sub for sub, started, done in records if started <= end])
+
+
+def cemnet_process():
+    from cemnet_ros.pipeline.aligner import ScanAligner
+
+    aligner = ScanAligner()
+    return aligner.process, aligner
+
+
+def icp_process(voxel: float):
+    """Plain sequential point-to-point ICP odometry on the same voxel grid (scipy k-d tree, identity init)."""
+    from cemnet_ros.eval.baselines import ICPConfig, icp
+    from cemnet_ros.pipeline.preprocess import voxel_downsample
+
+    state = {"prev": None}
+    config = ICPConfig(max_iterations=30, max_distance=3.0 * voxel)
+
+    def process(points: np.ndarray, stamp_ns: int) -> None:
+        cloud = voxel_downsample(points, voxel)
+        if state["prev"] is not None:
+            icp(cloud, state["prev"], config)
+        state["prev"] = cloud
+
+    return process
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=30.0, help="seconds of streaming per pipeline")
+    parser.add_argument("--rate", type=float, default=10.0, help="scan rate in Hz (KITTI: 10)")
+    parser.add_argument("--queue-size", type=int, default=2, help="worker queue bound (align_node default: 2)")
+    parser.add_argument("--source", choices=("auto", "kitti", "synthetic"), default="auto")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the plain-ICP baseline stream")
+    args = parser.parse_args(argv)
+    if args.duration <= 0 or args.rate <= 0:
+        parser.error("--duration and --rate must be > 0")
+    use_kitti = args.source == "kitti" or (args.source == "auto" and KITTI.is_dir())
+    if args.source == "kitti" and not KITTI.is_dir():
+        parser.error(f"{KITTI} not found")
+    scans = kitti_scans() if use_kitti else synthetic_scans()
+    print(f"scans: {'KITTI (real)' if use_kitti else 'synthetic'}, {len(scans)} distinct, "
+          f"{int(np.mean([len(s) for s in scans]))} points each; {args.rate:g} Hz for {args.duration:g} s, "
+          f"queue {args.queue_size}")
+    process, aligner = cemnet_process()
+    process(scans[0], 0)  # warm-up: loads weights, compiles the numba kernels
+    process(scans[1], 100_000_000)
+    scale = aligner.scale
+    aligner.reset()
+    results = [run_stream("CEMNet", process, scans, args.rate, args.duration, args.queue_size)]
+    print(results[0].summary(args.rate), flush=True)
+    if not args.no_baseline:
+        voxel = aligner.config.voxel_size if aligner.config.voxel_size > 0 else scale / 100.0
+        results.append(run_stream("ICP", icp_process(voxel), scans, args.rate, args.duration, args.queue_size))
+        print(results[1].summary(args.rate))
+        if results[1].rate_hz > 0:
+            print(f"CEMNet / ICP sustained rate: {results[0].rate_hz / results[1].rate_hz:.2f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,139 @@
+"""PointCloud2 decoding over every layout the node may meet, and every way a cloud can be broken."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from cemnet_ros.pointcloud2 import (FLOAT32, FLOAT64, INT16, UINT8, CloudError, decode_xyz, encode_xyz,
+                                    make_pointcloud2)
+
+
+def field(name, offset, datatype, count=1):
+    return SimpleNamespace(name=name, offset=offset, datatype=datatype, count=count)
+
+
+def cloud(points, *, dtype="<f4", offsets=(0, 4, 8), point_step=None, row_pad=0, height=1, extra=(),
+          datatype=None):
+    """A duck-typed PointCloud2 holding ``points`` (height * width, 3) at the given layout."""
+    points = np.asarray(points, dtype=np.float64)
+    size = np.dtype(dtype).itemsize
+    point_step = point_step or max(offsets) + size
+    width = len(points) // height
+    row_step = width * point_step + row_pad
+    data = bytearray(row_step * height)
+    for i, p in enumerate(points):
+        r, c = divmod(i, width)
+        for off, v in zip(offsets, p):
+            start = r * row_step + c * point_step + off
+            data[start:start + size] = np.array(v, dtype=dtype).tobytes()
+    datatype = datatype or (FLOAT32 if size == 4 else FLOAT64)
+    fields = [field(n, o, datatype) for n, o in zip("xyz", offsets)] + list(extra)
+    return SimpleNamespace(height=height, width=width, fields=fields, is_bigendian=dtype.startswith(">"),
+                           point_step=point_step, row_step=row_step, data=bytes(data), is_dense=False)
+
+
+RNG = np.random.default_rng(0)
+PTS = RNG.normal(size=(12, 3)) * 10
+
+
+def test_plain_float32():
+    out, report = decode_xyz(cloud(PTS))
+    np.testing.assert_allclose(out, PTS, rtol=1e-6)
+    assert out.dtype == np.float64 and report.n_total == 12 and report.n_nonfinite == 0
+
+
+@pytest.mark.parametrize("dtype", ["<f8", ">f4", ">f8"])
+def test_float64_and_big_endian(dtype):
+    size = np.dtype(dtype).itemsize
+    out, _ = decode_xyz(cloud(PTS, dtype=dtype, offsets=(0, size, 2 * size)))
+    np.testing.assert_allclose(out, PTS, rtol=1e-6)
+
+
+def test_offsets_padding_and_extra_fields():
+    # Velodyne-like: x y z at 0 4 8, intensity at 16, ring at 20, point_step 32, 7 bytes of row padding.
+    extra = (field("intensity", 16, FLOAT32), field("ring", 20, UINT8))
+    out, _ = decode_xyz(cloud(PTS, offsets=(0, 4, 8), point_step=32, row_pad=7, extra=extra))
+    np.testing.assert_allclose(out, PTS, rtol=1e-6)
+    # Shuffled order: z first, x last, unaligned offsets.
+    out, _ = decode_xyz(cloud(PTS, offsets=(9, 5, 1), point_step=15))
+    np.testing.assert_allclose(out, PTS, rtol=1e-6)
+
+
+def test_organised_cloud_with_nans():
+    pts = PTS.copy()
+    pts[[1, 5]] = np.nan
+    pts[7, 2] = np.inf
+    out, report = decode_xyz(cloud(pts, height=3, row_pad=4))
+    keep = np.isfinite(pts).all(1)
+    np.testing.assert_allclose(out, PTS[keep], rtol=1e-6)
+    assert report.n_total == 12 and report.n_valid == 9 and report.n_nonfinite == 3
+
+
+def test_data_types_of_rclpy_and_rosbags():
+    msg = cloud(PTS)
+    for data in (np.frombuffer(msg.data, np.uint8), list(msg.data), bytearray(msg.data)):
+        out, _ = decode_xyz(SimpleNamespace(**{**vars(msg), "data": data}))
+        np.testing.assert_allclose(out, PTS, rtol=1e-6)
+
+
+@pytest.mark.parametrize("mutate, kind, words", [
+    (lambda m: m.__dict__.update(width=0, data=b""), "empty", "empty"),
+    (lambda m: m.__dict__.update(height=0), "empty", "empty"),
+    (lambda m: m.__dict__.update(fields=[f for f in m.fields if f.name != "y"]), "missing_field", "y"),
+    (lambda m: m.__dict__.update(fields=[]), "missing_field", "x, y, z"),
+    (lambda m: m.fields[2].__dict__.update(datatype=INT16), "field_type", "INT16"),
+    (lambda m: m.fields[0].__dict__.update(datatype=42), "field_type", "unknown datatype 42"),
+    (lambda m: m.__dict__.update(data=m.data[:-1]), "truncated", "truncated"),
+    (lambda m: m.__dict__.update(point_step=8, row_step=8 * m.width), "layout", "point_step 8"),
+    (lambda m: m.__dict__.update(row_step=m.row_step - 1), "layout", "row_step"),
+])
+def test_bad_clouds_raise_clear_errors(mutate, kind, words):
+    msg = cloud(PTS)
+    mutate(msg)
+    with pytest.raises(CloudError, match=words) as err:
+        decode_xyz(msg)
+    assert err.value.kind == kind and isinstance(err.value, ValueError)
+
+
+def test_all_nan_cloud_is_rejected():
+    with pytest.raises(CloudError, match="no finite") as err:
+        decode_xyz(cloud(np.full((4, 3), np.nan)))
+    assert err.value.kind == "no_finite"
+
+
+def test_encode_round_trip():
+    enc = encode_xyz(PTS)
+    assert enc.point_step == 12 and enc.row_step == 12 * len(PTS) and len(enc.data) == enc.row_step
+    msg = SimpleNamespace(height=1, width=enc.width, is_bigendian=False, point_step=enc.point_step,
+                          row_step=enc.row_step, data=enc.data, fields=[field(*f) for f in enc.fields])
+    out, _ = decode_xyz(msg)
+    np.testing.assert_allclose(out, PTS.astype(np.float32), rtol=0, atol=0)
+    with pytest.raises(ValueError):
+        encode_xyz(np.zeros((3, 2)))
+
+
+def test_make_pointcloud2_rclpy_round_trip():
+    from rclpy.serialization import deserialize_message, serialize_message
+    from builtin_interfaces.msg import Time
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    msg = make_pointcloud2(PointCloud2, PointField, PTS, "lidar", Time(sec=3, nanosec=7))
+    back = deserialize_message(serialize_message(msg), PointCloud2)
+    assert back.header.frame_id == "lidar" and back.header.stamp.sec == 3 and back.header.stamp.nanosec == 7
+    np.testing.assert_allclose(decode_xyz(back)[0], PTS, rtol=1e-6)
+
+
+def test_make_pointcloud2_rosbags_round_trip():
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types = store.types
+    stamp = types["builtin_interfaces/msg/Time"](sec=1, nanosec=2)
+    msg = make_pointcloud2(types["sensor_msgs/msg/PointCloud2"], types["sensor_msgs/msg/PointField"], PTS,
+                           "cam", stamp, header_cls=types["std_msgs/msg/Header"])
+    raw = store.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2")
+    back = store.deserialize_cdr(raw, "sensor_msgs/msg/PointCloud2")
+    assert back.header.frame_id == "cam"
+    np.testing.assert_allclose(decode_xyz(back)[0], PTS, rtol=1e-6)
