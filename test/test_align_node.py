@@ -321,7 +321,9 @@ def test_replay_bag_over_dds(harness_factory, bag):
     from cemnet_ros.replay.trajectory import absolute_trajectory_error
 
     clouds, truth = _read_bag(bag)
-    h = harness_factory({"n_candidates": 1000, "n_iters": 10})
+    from cemnet_ros.pipeline.aligner import AlignerConfig
+    cem = AlignerConfig().registration.cem
+    h = harness_factory({"n_candidates": cem.n_candidates, "n_iters": cem.n_iters})  # the node's default CEM
     estimates, started = [], time.monotonic()
     for k, (ns, raw) in enumerate(clouds):
         odom = h.send(raw, timeout=FIRST_TIMEOUT if k < 2 else 120.0)

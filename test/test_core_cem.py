@@ -49,7 +49,7 @@ def test_fused_reward_is_used_in_first_iterations(monkeypatch, bracket):
     monkeypatch.setattr(scoring.CandidateScorer, "cost", spy)
     src = torch.tensor(bracket[:128], dtype=torch.float32)[None]
     CEMNet(CEMConfig(n_candidates=16, n_iters=5, n_fused_iters=2))(src, src)
-    assert calls == [True, True, False, False, False]
+    assert calls == [True, True, False, False, False, False]  # the last call scores mu_T for the fitness
 
 
 def test_seeded_runs_are_reproducible(bracket):
@@ -64,3 +64,31 @@ def test_seeded_runs_are_reproducible(bracket):
 def test_invalid_config_is_rejected(bad):
     with pytest.raises(ValueError):
         CEMConfig(**bad)
+
+
+def test_exploration_blend_applies_to_the_network_prior_only(monkeypatch, bracket):
+    from cemnet_ros.core import engine as engine_module
+    seen = []
+    original = engine_module.CandidateScorer.cost
+
+    def spy(self, candidates, fused):
+        seen.append(candidates.detach().clone())
+        return original(self, candidates, fused)
+
+    monkeypatch.setattr(engine_module.CandidateScorer, "cost", spy)
+    src = torch.tensor(bracket[:128], dtype=torch.float32)[None]
+    cem = CEMConfig(n_candidates=4000, n_iters=1, n_fused_iters=0, exploration_weight=0.5)
+    given_mu, given_sigma = torch.full((1, 6), 0.2), torch.full((1, 6), 0.01)
+    CEMNet(cem)(src, src, given_mu, given_sigma)
+    torch.testing.assert_close(seen[0].mean(1), given_mu, atol=2e-3, rtol=0)  # used as given
+    torch.testing.assert_close(seen[0].std(1), given_sigma, atol=2e-3, rtol=0)
+    seen.clear()
+
+    class FixedNetwork(torch.nn.Module):
+        def forward(self, source, target):
+            return given_mu.clone(), given_sigma.clone()
+
+    CEMNet(cem, FixedNetwork())(src, src)
+    torch.testing.assert_close(seen[0].mean(1), 0.5 * given_mu, atol=0.05, rtol=0)  # blended
+    expected_sigma = 0.5 * given_sigma + 0.5 * torch.tensor(cem.exploration_sigma)
+    torch.testing.assert_close(seen[0].std(1), expected_sigma, atol=0.05, rtol=0)

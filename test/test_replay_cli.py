@@ -171,7 +171,7 @@ def test_replay_bad_inputs_exit_2(tiny_bag, tmp_path, capsys, argv, message):
 
 def test_config_yaml_ros_format_and_overrides(tmp_path):
     cfg_file = tmp_path / "p.yaml"
-    cfg_file.write_text("align_node:\n  ros__parameters:\n    n_candidates: 321\n    n_iters: 2\n"
+    cfg_file.write_text("align_node:\n  ros__parameters:\n    n_candidates: 321\n    n_iters: 2\n    n_fused_iters: 5\n"
                         "    voxel_size: 0.3\n    prior: identity\n    weights: ''\n    input_topic: points\n")
     config = build_config(load_params(cfg_file))
     assert config.registration.cem.n_candidates == 321 and config.registration.cem.n_iters == 2

@@ -21,8 +21,9 @@ class CEMConfig:
     icp_steps: int = 3  # ICP steps behind the future reward
     epsilon: float = 0.1  # truncation of the max-consensus reward
     alpha: float = 0.5  # weight of the current reward in the fused score
-    # The reference's test-time exploration blend: mu0 <- (1-w) mu0, sigma0 <- (1-w) sigma0 + w * exploration_sigma
-    # (0.5 at test time, 0 in training). It widens a confident but wrong network prior.
+    # The reference's test-time exploration blend of the sampling network's output: mu0 <- (1-w) mu0,
+    # sigma0 <- (1-w) sigma0 + w * exploration_sigma (0.5 at test time, 0 in training). It widens a confident but
+    # wrong network prior; a prior given by the caller (motion model, identity) is used as it is.
     exploration_weight: float = 0.5
     exploration_sigma: Six = (1.0, 1.0, 1.0, 0.5, 0.5, 0.5)
     # ICP correspondences farther than this (cloud units) are ignored; None = 2 * epsilon.

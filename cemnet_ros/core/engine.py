@@ -15,12 +15,13 @@ from .sparsemax import sparsemax
 
 @dataclass
 class CEMOutput:
-    """Final Gaussian (mu_T, sigma_T) and the initial one (mu0, sigma0); all (B, 6)."""
+    """Final Gaussian (mu_T, sigma_T), the initial one (mu0, sigma0), all (B, 6), and the fitness of mu_T (B,)."""
 
     mu: torch.Tensor
     sigma: torch.Tensor
     mu0: torch.Tensor
     sigma0: torch.Tensor
+    fitness: torch.Tensor  # max-consensus reward of mu_T / 2, in [0, 1]
 
 
 class CEMNet(nn.Module):
@@ -44,17 +45,22 @@ class CEMNet(nn.Module):
         b = source.shape[0]
         return source.new_zeros(b, 6), self.prior_sigma.to(source).expand(b, 6)
 
+    def explore(self, mu0: torch.Tensor, sigma0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The reference's test-time blend of the network's Gaussian towards N(0, exploration_sigma)."""
+        w = self.cem.exploration_weight
+        if w == 0:
+            return mu0, sigma0
+        return (1.0 - w) * mu0, (1.0 - w) * sigma0 + w * sigma0.new_tensor(self.cem.exploration_sigma)
+
     def forward(self, source: torch.Tensor, target: torch.Tensor, mu0: torch.Tensor | None = None,
                 sigma0: torch.Tensor | None = None, generator: torch.Generator | None = None) -> CEMOutput:
-        """source (B, n, 3), target (B, m, 3); mu0/sigma0 (B, 6) override the initial distribution."""
+        """source (B, n, 3), target (B, m, 3); mu0/sigma0 (B, 6) given (e.g. a motion model) are used as they are."""
         cem = self.cem
         if mu0 is None or sigma0 is None:
             mu0, sigma0 = self.initial_distribution(source, target)
-        mu, sigma = mu0, sigma0
-        if cem.exploration_weight > 0:
-            w = cem.exploration_weight
-            mu = (1.0 - w) * mu
-            sigma = (1.0 - w) * sigma + w * sigma.new_tensor(cem.exploration_sigma)
+            mu, sigma = self.explore(mu0, sigma0) if self.network is not None else (mu0, sigma0)
+        else:
+            mu, sigma = mu0, sigma0
         scorer = CandidateScorer(source, target, cem)
         b = source.shape[0]
         for k in range(cem.n_iters):
@@ -63,4 +69,5 @@ class CEMNet(nn.Module):
             weights = sparsemax(-scorer.cost(candidates, fused=k < cem.n_fused_iters), dim=1).unsqueeze(-1)
             mu = (weights * candidates).sum(1)
             sigma = ((weights * (candidates - mu.unsqueeze(1)).square()).sum(1) + 1e-12).sqrt()
-        return CEMOutput(mu, sigma, mu0, sigma0)
+        fitness = 1.0 - scorer.cost(mu.unsqueeze(1), fused=False).squeeze(1) / 2.0
+        return CEMOutput(mu, sigma, mu0, sigma0, fitness)

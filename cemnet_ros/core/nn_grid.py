@@ -49,37 +49,46 @@ def build_grid(points: np.ndarray, radius: float, spacing: float) -> Grid:
     with_sentinel = np.vstack([points, np.full((1, 3), FAR)])
     index_type = np.int16 if len(points) < np.iinfo(np.int16).max else np.int32  # small lattices stay in cache
     node_nearest = np.full(int(np.prod(dims)), len(points), dtype=index_type)
-    _splat(points, lo, dims, spacing, radius + np.sqrt(3.0) * spacing, node_nearest,
-           np.full(node_nearest.size, np.inf))
+    _splat(with_sentinel, lo, dims, spacing, radius + np.sqrt(3.0) * spacing, node_nearest)
     return Grid(with_sentinel, node_nearest, lo, dims, spacing)
 
 
 @numba.njit(cache=True, fastmath=True, parallel=True)
-def _splat(points, origin, dims, spacing, radius, node_nearest, node_sq):
-    """Exact nearest point (within ``radius``) of every lattice node; threads own slabs of constant x index."""
+def _splat(points, origin, dims, spacing, radius, node_nearest):
+    """Exact nearest point (within ``radius``) of every lattice node; threads own slabs of constant x index.
+
+    ``points`` ends with the far sentinel that every node starts at, so no distance array is needed.
+    """
     r_sq = radius * radius
-    lo = np.empty((points.shape[0], 3), np.int64)
-    hi = np.empty((points.shape[0], 3), np.int64)
-    for i in range(points.shape[0]):
+    n = points.shape[0] - 1
+    lo = np.empty((n, 3), np.int64)
+    hi = np.empty((n, 3), np.int64)
+    for i in range(n):
         for k in range(3):
             lo[i, k] = max(int(np.ceil((points[i, k] - radius - origin[k]) / spacing)), 0)
             hi[i, k] = min(int(np.floor((points[i, k] + radius - origin[k]) / spacing)), dims[k] - 1)
     for a in numba.prange(dims[0]):
-        for i in range(points.shape[0]):
+        x = origin[0] + a * spacing
+        for i in range(n):
             if a < lo[i, 0] or a > hi[i, 0]:
                 continue
-            dx = origin[0] + a * spacing - points[i, 0]
+            dx = x - points[i, 0]
             for b in range(lo[i, 1], hi[i, 1] + 1):
-                dy = origin[1] + b * spacing - points[i, 1]
+                y = origin[1] + b * spacing
+                dy = y - points[i, 1]
                 dxy = dx * dx + dy * dy
                 if dxy > r_sq:
                     continue
                 base = (a * dims[1] + b) * dims[2]
                 for c in range(lo[i, 2], hi[i, 2] + 1):
-                    dz = origin[2] + c * spacing - points[i, 2]
+                    z = origin[2] + c * spacing
+                    dz = z - points[i, 2]
                     d = dxy + dz * dz
-                    if d <= r_sq and d < node_sq[base + c]:
-                        node_sq[base + c] = d
+                    if d > r_sq:
+                        continue
+                    j = node_nearest[base + c]
+                    ex, ey, ez = x - points[j, 0], y - points[j, 1], z - points[j, 2]
+                    if d < ex * ex + ey * ey + ez * ez:
                         node_nearest[base + c] = i
 
 

@@ -88,25 +88,27 @@ class Registrar:
         """Register B pairs of prepared clouds (B, n, 3), (B, m, 3); ``run_cem=False`` returns mu0 alone."""
         source = source.to(self.device, torch.float32)
         target = target.to(self.device, torch.float32)
+        cem = self.config.cem
         if run_cem:
             out = self.engine(source, target, mu0, sigma0, generator=self._generator())
-            mu, sigma, mu0, sigma0 = out.mu, out.sigma, out.mu0, out.sigma0
+            mu, sigma, mu0, sigma0, fitness = out.mu, out.sigma, out.mu0, out.sigma0, out.fitness
         else:
             if mu0 is None or sigma0 is None:
                 mu0, sigma0 = self.engine.initial_distribution(source, target)
-            mu, sigma = mu0, sigma0
+            mu, sigma, fitness = mu0, sigma0, None
         mu_np = mu.double().cpu().numpy()
         rotation = euler_to_matrix_np(mu_np[:, :3])
         translation = mu_np[:, 3:].copy()
         src_np, tgt_np = source.cpu().numpy(), target.cpu().numpy()
-        cem = self.config.cem
-        fitness = np.empty(len(mu_np))
+        refine = cem.refine_icp_steps > 0
+        fitness = np.empty(len(mu_np)) if fitness is None or refine else fitness.double().cpu().numpy()
         for b in range(len(mu_np)):
-            if cem.refine_icp_steps > 0:
+            if refine:
                 rotation[b], translation[b] = refine_with_icp(src_np[b], tgt_np[b], rotation[b], translation[b],
                                                               cem.refine_icp_steps, cem.epsilon)
                 mu_np[b] = matrix_to_action_np(np.block([[rotation[b], translation[b][:, None]], [0, 0, 0, 1]]))
-            fitness[b] = consensus_fitness(src_np[b], tgt_np[b], rotation[b], translation[b], cem.epsilon)
+            if refine or not run_cem:
+                fitness[b] = consensus_fitness(src_np[b], tgt_np[b], rotation[b], translation[b], cem.epsilon)
         return {"rotation": rotation, "translation": translation, "mu": mu_np,
                 "sigma": sigma.double().cpu().numpy(), "mu0": mu0.double().cpu().numpy(),
                 "sigma0": sigma0.double().cpu().numpy(), "fitness": fitness}

@@ -31,7 +31,13 @@ class CandidateScorer:
             spacing = cem.epsilon * LATTICE_SPACING
             self._src_grids = [nn_grid.build_grid(s, cem.epsilon, spacing).astuple() for s in self._src_np]
             self._tgt_grids = [nn_grid.build_grid(t, cem.epsilon, spacing).astuple() for t in self._tgt_np]
-            self._icp_grids = [nn_grid.build_grid(t, cem.icp_radius, spacing).astuple() for t in self._tgt_np]
+            self._icp_grids: list | None = None  # built on the first fused iteration only
+
+    def _icp_grid(self, b: int):
+        if self._icp_grids is None:
+            spacing = self.cem.epsilon * LATTICE_SPACING
+            self._icp_grids = [nn_grid.build_grid(t, self.cem.icp_radius, spacing).astuple() for t in self._tgt_np]
+        return self._icp_grids[b]
 
     def cost(self, candidates: torch.Tensor, fused: bool) -> torch.Tensor:
         """(B, N, 6) -> (B, N) cost 2 - reward; ``fused``: alpha * now + (1 - alpha) * after ICP."""
@@ -53,7 +59,7 @@ class CandidateScorer:
         rot, trans = np.ascontiguousarray(rot), np.ascontiguousarray(trans)
         args = (self._src_np[b], self._tgt_np[b], self._tgt_grids[b], self._src_grids[b])
         if icp:
-            return nn_grid.consensus_after_icp_batch(*args, self._icp_grids[b], rot, trans, self.cem.epsilon,
+            return nn_grid.consensus_after_icp_batch(*args, self._icp_grid(b), rot, trans, self.cem.epsilon,
                                                      self.cem.icp_radius, self.cem.icp_steps)
         return nn_grid.consensus_batch(*args, rot, trans, self.cem.epsilon)
 

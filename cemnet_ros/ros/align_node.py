@@ -61,6 +61,9 @@ def _int_range(low: int, high: int) -> list:
     return [IntegerRange(from_value=low, to_value=high, step=1)]
 
 
+_DEFAULTS = AlignerConfig()  # the pipeline's defaults are the node's: one source of truth
+_CEM = _DEFAULTS.registration.cem
+
 # name: (default, description, range or None). Types follow the defaults.
 PARAMETERS = {
     "mode": ("sequential", "'sequential' (scan to previous scan) or 'pair' (source to target topic)", None),
@@ -76,23 +79,27 @@ PARAMETERS = {
     "qos_reliability": ("best_effort", "input QoS reliability: 'best_effort' (sensor data) or 'reliable'", None),
     "qos_depth": (5, "input QoS history depth", _int_range(1, 1000)),
     "queue_size": (2, "scans waiting for the worker; when full the oldest is dropped", _int_range(1, 100)),
-    "prior": ("motion", "CEM initial distribution: 'motion' (constant velocity), 'network' or 'identity'", None),
-    "prior_sigma_rotation": (0.05, "motion prior spread of the rotations (rad)", _float_range(1e-4, 3.2)),
-    "prior_sigma_translation": (0.5, "motion prior spread of the translation (m)", _float_range(1e-4, 1000.0)),
-    "identity_sigma": (1.0, "identity prior spread (rad and network units)", _float_range(1e-4, 10.0)),
-    "scale": (0.0, "metres per network unit; 0 = auto (robust radius of the first target cloud)",
+    "prior": (_DEFAULTS.prior, "CEM initial distribution: 'motion' (constant velocity), 'network' or 'identity'", None),
+    "prior_sigma_rotation": (_DEFAULTS.prior_sigma_rotation, "motion prior spread of the rotations (rad)", _float_range(1e-4, 3.2)),
+    "prior_sigma_translation": (_DEFAULTS.prior_sigma_translation, "motion prior spread of the translation (m)", _float_range(1e-4, 1000.0)),
+    "identity_sigma": (_DEFAULTS.identity_sigma, "identity prior spread (rad and network units)", _float_range(1e-4, 10.0)),
+    "scale": (_DEFAULTS.scale, "metres per network unit; 0 = auto (robust radius of the first target cloud)",
               _float_range(0.0, 10000.0)),
-    "voxel_size": (0.0, "voxel grid size (m); 0 = auto (scale / 100), negative = no voxel grid",
+    "voxel_size": (_DEFAULTS.voxel_size, "voxel grid size (m); 0 = auto (scale / 100), negative = no voxel grid",
                    _float_range(-1.0, 1000.0)),
-    "min_range": (0.0, "drop points closer than this to the sensor (m); 0 = off", _float_range(0.0, 10000.0)),
-    "max_range": (100.0, "drop points farther than this from the sensor (m); 0 = off", _float_range(0.0, 10000.0)),
-    "n_points": (768, "points per cloud fed to the network and the CEM", _int_range(32, 100000)),
-    "n_candidates": (1000, "CEM candidates per iteration", _int_range(2, 100000)),
-    "n_iters": (10, "CEM iterations", _int_range(1, 1000)),
-    "epsilon": (0.1, "max-consensus truncation distance (network units)", _float_range(1e-4, 10.0)),
-    "refine_iters": (10, "point-to-plane ICP steps on the voxel clouds after the CEM; 0 = pure CEMNet",
+    "min_range": (_DEFAULTS.min_range, "drop points closer than this to the sensor (m); 0 = off", _float_range(0.0, 10000.0)),
+    "max_range": (_DEFAULTS.max_range, "drop points farther than this from the sensor (m); 0 = off", _float_range(0.0, 10000.0)),
+    "n_points": (_DEFAULTS.registration.n_points, "points per cloud fed to the network and the CEM", _int_range(32, 100000)),
+    "n_candidates": (_CEM.n_candidates, "CEM candidates per iteration", _int_range(2, 100000)),
+    "n_iters": (_CEM.n_iters, "CEM iterations", _int_range(1, 1000)),
+    "n_fused_iters": (_CEM.n_fused_iters, "CEM iterations fusing the after-ICP ('future') reward (paper: 3)",
+                      _int_range(0, 1000)),
+    "epsilon": (_CEM.epsilon, "max-consensus truncation distance (network units)", _float_range(1e-4, 10.0)),
+    "refine_iters": (_DEFAULTS.refine_iters, "point-to-plane ICP steps on the voxel clouds after the CEM; 0 = pure CEMNet",
                      _int_range(0, 100)),
-    "fitness_threshold": (0.3, "below this fitness a step is flagged, its covariance inflated and the motion "
+    "refine_points": (_DEFAULTS.refine_points, "source points the ICP polish uses at most (seeded subset)",
+                      _int_range(10, 10_000_000)),
+    "fitness_threshold": (_DEFAULTS.fitness_threshold, "below this fitness a step is flagged, its covariance inflated and the motion "
                                "prediction used", _float_range(0.0, 1.0)),
     "weights": ("", "sampling network weights (.npz, or an official .pth with allow_pickle); '' = package weights",
                 None),
@@ -135,13 +142,14 @@ class AlignNode(Node):
         self._config = AlignerConfig(
             registration=RegistrationConfig(
                 cem=CEMConfig(n_candidates=p["n_candidates"], n_iters=p["n_iters"],
-                              n_fused_iters=min(CEMConfig.n_fused_iters, p["n_iters"]), epsilon=p["epsilon"]),
+                              n_fused_iters=min(p["n_fused_iters"], p["n_iters"]), epsilon=p["epsilon"]),
                 n_points=p["n_points"], weights=p["weights"] or None, allow_pickle=p["allow_pickle"],
                 device=p["device"]),
             prior=_choice("prior", p["prior"], PRIORS), prior_sigma_rotation=p["prior_sigma_rotation"],
             prior_sigma_translation=p["prior_sigma_translation"], identity_sigma=p["identity_sigma"],
             scale=p["scale"], voxel_size=p["voxel_size"], min_range=p["min_range"], max_range=p["max_range"],
-            refine_iters=p["refine_iters"], fitness_threshold=p["fitness_threshold"])
+            refine_iters=p["refine_iters"], refine_points=p["refine_points"],
+            fitness_threshold=p["fitness_threshold"])
         self._aligner = ScanAligner(self._config)
 
         self._lock = threading.Lock()  # counters and pairing buffers

@@ -33,8 +33,9 @@ POSE_TOPIC, ODOM_TOPIC, CLOUD_TOPIC = "/cemnet/pose", "/cemnet/odometry", "/cemn
 
 # CLI override -> config field. Names are looked up in AlignerConfig, then RegistrationConfig, then CEMConfig.
 OVERRIDES = {
-    "prior": str, "n_candidates": int, "n_iters": int, "n_points": int, "scale": float, "voxel_size": float,
-    "refine_icp_steps": int, "refine_iters": int, "min_range": float, "max_range": float, "sampling": str,
+    "prior": str, "n_candidates": int, "n_iters": int, "n_fused_iters": int, "n_points": int, "scale": float, "voxel_size": float,
+    "refine_icp_steps": int, "refine_iters": int, "refine_points": int, "min_range": float, "max_range": float,
+    "sampling": str,
     "weights": str, "fitness_threshold": float, "seed": int,
 }
 
@@ -99,8 +100,9 @@ def build_config(params: dict[str, Any]):
     values = {k: v for k, v in params.items() if k in known}
     if values.get("weights") == "":  # ROS parameter files cannot hold None: '' = package weights
         values["weights"] = None
-    if "n_iters" in values and "n_fused_iters" not in values:  # as align_node: --n-iters 2 alone stays valid
-        values["n_fused_iters"] = min(base.registration.cem.n_fused_iters, int(values["n_iters"]))
+    if "n_iters" in values:  # as align_node: --n-iters 2 alone stays valid
+        fused = values.get("n_fused_iters", base.registration.cem.n_fused_iters)
+        values["n_fused_iters"] = min(int(fused), int(values["n_iters"]))
     return _apply(base, values, "AlignerConfig")
 
 
