@@ -45,3 +45,19 @@ def test_bundled_weights_predict_a_useful_prior(bracket):
     # Far better than the identity (angles ~15 deg, translation ~0.25): within a few degrees / centimetres.
     assert np.degrees(np.abs(mu0[0, :3].numpy() - angles)).max() < 6.0
     assert np.abs(mu0[0, 3:].numpy() - trans).max() < 0.06
+
+
+def test_folded_batchnorm_equals_the_plain_layers():
+    torch.manual_seed(0)
+    net = SamplingNetwork().eval()
+    for module in net.modules():
+        if isinstance(module, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)):
+            module.running_mean.uniform_(-0.5, 0.5)
+            module.running_var.uniform_(0.5, 2.0)
+            module.weight.data.uniform_(0.5, 1.5)
+            module.bias.data.uniform_(-0.2, 0.2)
+    x = torch.randn(1, 64, 3)
+    with torch.no_grad():
+        folded = net.embedding(x, net._conv_bn_relu)
+        plain = net.embedding(x, lambda conv, bn, h: torch.relu(net._norm(bn, conv(h))))
+    torch.testing.assert_close(folded, plain, rtol=1e-4, atol=1e-5)
