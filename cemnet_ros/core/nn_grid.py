@@ -113,9 +113,9 @@ def _nearest_sq(qx, qy, qz, points, node_nearest, origin, dims, spacing):
                 dy = points[j, 1] - qy
                 dz = points[j, 2] - qz
                 d = dx * dx + dy * dy + dz * dz
-                if d < best:
-                    best = d
-                    best_i = j
+                closer = d < best
+                best_i = j if closer else best_i  # selects, not branches: the winner is unpredictable
+                best = min(d, best)
     return best, best_i
 
 
