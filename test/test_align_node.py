@@ -28,6 +28,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from cemnet_ros.pointcloud2 import decode_xyz, make_pointcloud2  # noqa: E402
 from cemnet_ros.ros.align_node import PARAMETERS, AlignNode  # noqa: E402
+from street_scene import make_transform, make_world  # noqa: E402
 
 pytestmark = pytest.mark.dds
 
@@ -35,23 +36,6 @@ REPO = Path(__file__).resolve().parents[1]
 BAGS = sorted((REPO / "bags").glob("*.mcap"))
 FAST = {"n_candidates": 300, "n_iters": 6, "qos_reliability": "reliable", "queue_size": 10}
 FIRST_TIMEOUT = 120.0  # the first registration JIT-compiles the numba kernels on a cold cache
-
-
-def make_transform(yaw=0.0, t=(0.0, 0.0, 0.0)):
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_euler("z", yaw).as_matrix()
-    out[:3, 3] = t
-    return out
-
-
-def make_world(seed=1, n=20000):
-    """A street-like scene in metres: ground, two walls and a few boxes."""
-    rng = np.random.default_rng(seed)
-    ground = np.c_[rng.uniform(-20, 20, (n // 2, 2)), np.full(n // 2, -1.5)]
-    wall_a = np.c_[rng.uniform(-20, 20, n // 8), np.full(n // 8, 6.0), rng.uniform(-1.5, 3, n // 8)]
-    wall_b = np.c_[np.full(n // 8, 15.0), rng.uniform(-6, 6, n // 8), rng.uniform(-1.5, 3, n // 8)]
-    boxes = [rng.uniform(-0.8, 0.8, (n // 32, 3)) + [c[0], c[1], -0.7] for c in rng.uniform(-12, 12, (8, 2))]
-    return np.vstack([ground, wall_a, wall_b] + boxes)
 
 
 WORLD = make_world()

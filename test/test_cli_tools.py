@@ -1,6 +1,5 @@
 """Smoke runs of cemnet-eval, cemnet-bench and cemnet-register on tiny synthetic data (small CEM settings)."""
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -17,23 +17,7 @@ from cemnet_ros.pipeline.preprocess import (crop_range, farthest_point_indices, 
                                             subsample, voxel_downsample)
 from cemnet_ros.pipeline.refine import PlaneTarget, point_to_plane_icp
 from cemnet_ros.pipeline.worker import BoundedWorker
-
-
-def make_transform(yaw=0.0, t=(0.0, 0.0, 0.0), roll=0.0, pitch=0.0):
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_euler("xyz", [roll, pitch, yaw]).as_matrix()
-    out[:3, 3] = t
-    return out
-
-
-def make_world(seed=1, n=20000):
-    """A street-like scene in metres: ground, two walls and a few boxes (structure in every direction)."""
-    rng = np.random.default_rng(seed)
-    ground = np.c_[rng.uniform(-20, 20, (n // 2, 2)), np.full(n // 2, -1.5)]
-    wall_a = np.c_[rng.uniform(-20, 20, n // 8), np.full(n // 8, 6.0), rng.uniform(-1.5, 3, n // 8)]
-    wall_b = np.c_[np.full(n // 8, 15.0), rng.uniform(-6, 6, n // 8), rng.uniform(-1.5, 3, n // 8)]
-    boxes = [rng.uniform(-0.8, 0.8, (n // 32, 3)) + [c[0], c[1], -0.7] for c in rng.uniform(-12, 12, (8, 2))]
-    return np.vstack([ground, wall_a, wall_b] + boxes)
+from street_scene import make_transform, make_world
 
 
 def scan_of(world, pose, rng, n=12000):
