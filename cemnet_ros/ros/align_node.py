@@ -258,20 +258,11 @@ class AlignNode(Node):
         return best if abs(best.stamp_ns - stamp_ns) <= self._pair_tolerance_ns else None
 
     def _reject(self, kind: str, message: str) -> None:
-        """Count a rejected input and warn at most every WARN_PERIOD_S per kind.
-
-        rclpy's ``throttle_duration_sec`` throttles per call site, which would hide a second kind of bad input
-        behind the first; hence the per-kind bookkeeping.
-        """
-        now = time.monotonic()
+        """Count a rejected input and warn at most every WARN_PERIOD_S per kind."""
         with self._lock:
             self._rejected[kind] += 1
             count = self._rejected[kind]
-            warn = now - self._last_warn.get(kind, -np.inf) >= WARN_PERIOD_S
-            if warn:
-                self._last_warn[kind] = now
-        if warn:
-            self.get_logger().warn(f"[{kind}] {message} ({count} rejected so far)")
+        self._warn_throttled(kind, f"[{kind}] {message} ({count} rejected so far)")
 
     # -- worker thread ---------------------------------------------------------------------------------------
     def _process(self, item: Any) -> None:
@@ -300,6 +291,8 @@ class AlignNode(Node):
         self._publish(step, source, frame, dt_s)
 
     def _warn_throttled(self, kind: str, message: str) -> None:
+        """Warn at most every WARN_PERIOD_S per kind: rclpy's ``throttle_duration_sec`` throttles per call site,
+        which would hide a second kind of bad input behind the first."""
         now = time.monotonic()
         with self._lock:
             warn = now - self._last_warn.get(kind, -np.inf) >= WARN_PERIOD_S
