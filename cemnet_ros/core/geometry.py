@@ -49,15 +49,6 @@ def matrix_to_euler_np(rotation: np.ndarray) -> np.ndarray:
     return matrix_to_euler(torch.as_tensor(np.asarray(rotation, dtype=np.float64))).numpy()
 
 
-def action_to_matrix_np(action: np.ndarray) -> np.ndarray:
-    """(6,) action -> 4x4 homogeneous transform."""
-    action = np.asarray(action, dtype=np.float64)
-    transform = np.eye(4)
-    transform[:3, :3] = euler_to_matrix_np(action[:3])
-    transform[:3, 3] = action[3:]
-    return transform
-
-
 def matrix_to_action_np(transform: np.ndarray) -> np.ndarray:
     """4x4 homogeneous transform -> (6,) action [z, y, x, tx, ty, tz]."""
     transform = np.asarray(transform, dtype=np.float64)
