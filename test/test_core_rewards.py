@@ -52,3 +52,19 @@ def test_geman_mcclure_loss_properties(bracket):
     assert loss.item() > 0 and moved.grad.abs().sum() > 0
     # Bounded by 2 * mu however far apart (robust estimator).
     assert geman_mcclure_loss((pts + 100)[None], pts[None], mu=0.01).item() <= 0.02 + 1e-9
+
+
+def test_cpu_and_torch_scorers_agree_on_fused_costs(bracket):
+    """The numba lattice path and the brute-force torch path (CUDA's) give the same CEM costs."""
+    from cemnet_ros.core.config import CEMConfig
+    from cemnet_ros.core.scoring import CandidateScorer
+
+    src = torch.tensor(bracket[:400], dtype=torch.float32)[None]
+    tgt = torch.tensor(bracket[200:600] @ euler_to_matrix_np([0.05, 0.0, 0.02]).T + 0.02, dtype=torch.float32)[None]
+    candidates = torch.randn(1, 48, 6, generator=torch.Generator().manual_seed(0)) * 0.05
+    cpu = CandidateScorer(src, tgt, CEMConfig())
+    brute = CandidateScorer(src, tgt, CEMConfig())
+    brute.on_cpu = False  # the CUDA code path, run on the CPU here
+    for fused in (False, True):
+        fast, exact = cpu.cost(candidates, fused), brute.cost(candidates, fused)
+        torch.testing.assert_close(fast, exact, atol=5e-3, rtol=0)
