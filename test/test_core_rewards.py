@@ -65,6 +65,7 @@ def test_cpu_and_torch_scorers_agree_on_fused_costs(bracket):
     cpu = CandidateScorer(src, tgt, CEMConfig())
     brute = CandidateScorer(src, tgt, CEMConfig())
     brute.on_cpu = False  # the CUDA code path, run on the CPU here
-    for fused in (False, True):
+    # Costs span ~0.8-1.7 here; the fused ones inherit the ICP's rare approximate neighbours (measured 0.005).
+    for fused, tolerance in ((False, 1e-3), (True, 1e-2)):
         fast, exact = cpu.cost(candidates, fused), brute.cost(candidates, fused)
-        torch.testing.assert_close(fast, exact, atol=5e-3, rtol=0)
+        torch.testing.assert_close(fast, exact, atol=tolerance, rtol=0)
