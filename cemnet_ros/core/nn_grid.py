@@ -126,83 +126,108 @@ def _inlier_score(sq, eps):
 
 
 @numba.njit(cache=True, fastmath=True)
+def _reverse_score(tgt, src_grid, rot, trans, eps):
+    """sum_y max(0, 1 - d(y, R X + t)/eps): the source's lattice queried with R^T (y - t)."""
+    pts, nodes, origin, dims, spacing = src_grid
+    acc = 0.0
+    for i in range(tgt.shape[0]):
+        x, y, z = tgt[i, 0] - trans[0], tgt[i, 1] - trans[1], tgt[i, 2] - trans[2]
+        qx = rot[0, 0] * x + rot[1, 0] * y + rot[2, 0] * z
+        qy = rot[0, 1] * x + rot[1, 1] * y + rot[2, 1] * z
+        qz = rot[0, 2] * x + rot[1, 2] * y + rot[2, 2] * z
+        d, _ = _nearest_sq(qx, qy, qz, pts, nodes, origin, dims, spacing)
+        acc += _inlier_score(d, eps)
+    return acc
+
+
+@numba.njit(cache=True, fastmath=True)
 def _consensus(src, tgt_grid, tgt, src_grid, rot, trans, eps):
     """Max-consensus reward mean_x max(0, 1 - d/eps) + mean_y max(0, 1 - d/eps) of one rigid motion."""
-    tgt_pts, tgt_nodes, tgt_origin, tgt_dims, tgt_spacing = tgt_grid
-    src_pts, src_nodes, src_origin, src_dims, src_spacing = src_grid
-    acc_src = 0.0
+    pts, nodes, origin, dims, spacing = tgt_grid
+    acc = 0.0
     for i in range(src.shape[0]):
         x, y, z = src[i, 0], src[i, 1], src[i, 2]
         qx = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + trans[0]
         qy = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + trans[1]
         qz = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + trans[2]
-        d, _ = _nearest_sq(qx, qy, qz, tgt_pts, tgt_nodes, tgt_origin, tgt_dims, tgt_spacing)
-        acc_src += _inlier_score(d, eps)
-    acc_tgt = 0.0
-    for i in range(tgt.shape[0]):
-        # Query the source's lattice with the inversely transformed target point: R^T (y - t).
-        x, y, z = tgt[i, 0] - trans[0], tgt[i, 1] - trans[1], tgt[i, 2] - trans[2]
-        qx = rot[0, 0] * x + rot[1, 0] * y + rot[2, 0] * z
-        qy = rot[0, 1] * x + rot[1, 1] * y + rot[2, 1] * z
-        qz = rot[0, 2] * x + rot[1, 2] * y + rot[2, 2] * z
-        d, _ = _nearest_sq(qx, qy, qz, src_pts, src_nodes, src_origin, src_dims, src_spacing)
-        acc_tgt += _inlier_score(d, eps)
-    return acc_src / src.shape[0] + acc_tgt / tgt.shape[0]
+        d, _ = _nearest_sq(qx, qy, qz, pts, nodes, origin, dims, spacing)
+        acc += _inlier_score(d, eps)
+    return acc / src.shape[0] + _reverse_score(tgt, src_grid, rot, trans, eps) / tgt.shape[0]
 
 
 @numba.njit(cache=True, fastmath=True)
-def _icp(src, grid, radius, rot, trans, steps):
-    """Point-to-point ICP from (rot, trans), pairs within ``radius`` only; returns the refined motion."""
+def _icp_step(src, grid, radius_sq, rot, trans, eps):
+    """One point-to-point ICP step (pairs within the radius) from (rot, trans).
+
+    Returns the new motion, whether it moved (>= 3 pairs), and sum_x max(0, 1 - d/eps) of the starting motion:
+    the same look-ups give the forward half of its max-consensus reward (the lattice holds every point within
+    the ICP radius, which is larger than epsilon).
+    """
     pts, nodes, origin, dims, spacing = grid
-    r = rot.copy()
-    t = trans.copy()
-    radius_sq = radius * radius
-    sxy = np.empty((3, 3))
-    for _ in range(steps):
-        # Scalar accumulators keep the hot loop in registers.
-        n = 0
-        sx0 = sx1 = sx2 = sy0 = sy1 = sy2 = 0.0
-        s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
-        for i in range(src.shape[0]):
-            x0, x1, x2 = src[i, 0], src[i, 1], src[i, 2]
-            qx = r[0, 0] * x0 + r[0, 1] * x1 + r[0, 2] * x2 + t[0]
-            qy = r[1, 0] * x0 + r[1, 1] * x1 + r[1, 2] * x2 + t[1]
-            qz = r[2, 0] * x0 + r[2, 1] * x1 + r[2, 2] * x2 + t[2]
-            d, j = _nearest_sq(qx, qy, qz, pts, nodes, origin, dims, spacing)
-            if d > radius_sq:
-                continue
-            y0, y1, y2 = pts[j, 0], pts[j, 1], pts[j, 2]
-            n += 1
-            sx0 += x0
-            sx1 += x1
-            sx2 += x2
-            sy0 += y0
-            sy1 += y1
-            sy2 += y2
-            s00 += x0 * y0
-            s01 += x0 * y1
-            s02 += x0 * y2
-            s10 += x1 * y0
-            s11 += x1 * y1
-            s12 += x1 * y2
-            s20 += x2 * y0
-            s21 += x2 * y1
-            s22 += x2 * y2
-        if n < 3:
+    eps_sq = eps * eps
+    # Scalar accumulators keep the hot loop in registers.
+    n = 0
+    score = 0.0
+    sx0 = sx1 = sx2 = sy0 = sy1 = sy2 = 0.0
+    s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
+    for i in range(src.shape[0]):
+        x0, x1, x2 = src[i, 0], src[i, 1], src[i, 2]
+        qx = rot[0, 0] * x0 + rot[0, 1] * x1 + rot[0, 2] * x2 + trans[0]
+        qy = rot[1, 0] * x0 + rot[1, 1] * x1 + rot[1, 2] * x2 + trans[1]
+        qz = rot[2, 0] * x0 + rot[2, 1] * x1 + rot[2, 2] * x2 + trans[2]
+        d, j = _nearest_sq(qx, qy, qz, pts, nodes, origin, dims, spacing)
+        if d > radius_sq:
+            continue
+        if d <= eps_sq:
+            score += _inlier_score(d, eps)
+        y0, y1, y2 = pts[j, 0], pts[j, 1], pts[j, 2]
+        n += 1
+        sx0 += x0
+        sx1 += x1
+        sx2 += x2
+        sy0 += y0
+        sy1 += y1
+        sy2 += y2
+        s00 += x0 * y0
+        s01 += x0 * y1
+        s02 += x0 * y2
+        s10 += x1 * y0
+        s11 += x1 * y1
+        s12 += x1 * y2
+        s20 += x2 * y0
+        s21 += x2 * y1
+        s22 += x2 * y2
+    if n < 3:
+        return rot, trans, False, score
+    mx = np.array([sx0, sx1, sx2]) / n
+    my = np.array([sy0, sy1, sy2]) / n
+    sxy = np.array([[s00, s01, s02], [s10, s11, s12], [s20, s21, s22]]) / n
+    u_, _, vt = np.linalg.svd(sxy - np.outer(mx, my))
+    v_ = vt.T
+    fix = np.eye(3)
+    if np.linalg.det(v_ @ u_.T) < 0.0:
+        fix[2, 2] = -1.0
+    r = v_ @ fix @ u_.T
+    return r, my - r @ mx, True, score
+
+
+@numba.njit(cache=True, fastmath=True)
+def _fused(src, tgt, src_grid, icp_grid, rot, trans, eps, icp_radius, steps, alpha):
+    """alpha * reward(rot, trans) + (1 - alpha) * reward after ``steps`` ICP steps from it.
+
+    The first ICP step's look-ups double as the forward half of the current reward; a motion the ICP cannot
+    move (fewer than 3 pairs) keeps its reward.
+    """
+    radius_sq = icp_radius * icp_radius
+    r, t, moved, forward = _icp_step(src, icp_grid, radius_sq, rot, trans, eps)
+    now = forward / src.shape[0] + _reverse_score(tgt, src_grid, rot, trans, eps) / tgt.shape[0]
+    if not moved or steps == 0:
+        return now
+    for _ in range(steps - 1):
+        r, t, moved, _ = _icp_step(src, icp_grid, radius_sq, r, t, eps)
+        if not moved:
             break
-        mx = np.array([sx0, sx1, sx2]) / n
-        my = np.array([sy0, sy1, sy2]) / n
-        sxy[0, 0], sxy[0, 1], sxy[0, 2] = s00, s01, s02
-        sxy[1, 0], sxy[1, 1], sxy[1, 2] = s10, s11, s12
-        sxy[2, 0], sxy[2, 1], sxy[2, 2] = s20, s21, s22
-        u_, _, vt = np.linalg.svd(sxy / n - np.outer(mx, my))
-        v_ = vt.T
-        fix = np.eye(3)
-        if np.linalg.det(v_ @ u_.T) < 0.0:
-            fix[2, 2] = -1.0
-        r = v_ @ fix @ u_.T
-        t = my - r @ mx
-    return r, t
+    return alpha * now + (1.0 - alpha) * _consensus(src, icp_grid, tgt, src_grid, r, t, eps)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -215,10 +240,9 @@ def consensus_batch(src, tgt, tgt_grid, src_grid, rots, transs, eps):
 
 
 @numba.njit(cache=True, parallel=True)
-def consensus_after_icp_batch(src, tgt, tgt_grid, src_grid, icp_grid, rots, transs, eps, icp_radius, steps):
-    """(C,) max-consensus rewards after ``steps`` ICP steps started from each of the C rigid motions."""
+def fused_batch(src, tgt, src_grid, icp_grid, rots, transs, eps, icp_radius, steps, alpha):
+    """(C,) fused rewards alpha * now + (1 - alpha) * after ICP of C rigid motions (see :func:`_fused`)."""
     out = np.empty(rots.shape[0])
     for c in numba.prange(rots.shape[0]):
-        r, t = _icp(src, icp_grid, icp_radius, rots[c], transs[c], steps)
-        out[c] = _consensus(src, tgt_grid, tgt, src_grid, r, t, eps)
+        out[c] = _fused(src, tgt, src_grid, icp_grid, rots[c], transs[c], eps, icp_radius, steps, alpha)
     return out

@@ -41,33 +41,33 @@ class CandidateScorer:
 
     def cost(self, candidates: torch.Tensor, fused: bool) -> torch.Tensor:
         """(B, N, 6) -> (B, N) cost 2 - reward; ``fused``: alpha * now + (1 - alpha) * after ICP."""
+        fused = fused and self.cem.icp_steps > 0
         with torch.no_grad():
             rot, trans = action_to_rt(candidates.detach().double())
-            reward = self._reward(rot, trans, icp=False)
-            if fused and self.cem.icp_steps > 0:
-                after = self._reward(rot, trans, icp=True)
-                reward = self.cem.alpha * reward + (1.0 - self.cem.alpha) * after
+            if self.on_cpu:
+                reward = torch.from_numpy(np.stack([self._reward_cpu(b, rot[b].numpy(), trans[b].numpy(), fused)
+                                                    for b in range(rot.shape[0])]))
+            else:
+                reward = torch.stack([self._reward_torch(b, rot[b], trans[b], fused) for b in range(rot.shape[0])])
         return (2.0 - reward).to(candidates.dtype)
 
-    def _reward(self, rot: torch.Tensor, trans: torch.Tensor, icp: bool) -> torch.Tensor:
-        if self.on_cpu:
-            return torch.from_numpy(np.stack([self._reward_cpu(b, rot[b].numpy(), trans[b].numpy(), icp)
-                                              for b in range(rot.shape[0])]))
-        return torch.stack([self._reward_torch(b, rot[b], trans[b], icp) for b in range(rot.shape[0])])
-
-    def _reward_cpu(self, b: int, rot: np.ndarray, trans: np.ndarray, icp: bool) -> np.ndarray:
+    def _reward_cpu(self, b: int, rot: np.ndarray, trans: np.ndarray, fused: bool) -> np.ndarray:
         rot, trans = np.ascontiguousarray(rot), np.ascontiguousarray(trans)
-        args = (self._src_np[b], self._tgt_np[b], self._tgt_grids[b], self._src_grids[b])
-        if icp:
-            return nn_grid.consensus_after_icp_batch(*args, self._icp_grid(b), rot, trans, self.cem.epsilon,
-                                                     self.cem.icp_radius, self.cem.icp_steps)
-        return nn_grid.consensus_batch(*args, rot, trans, self.cem.epsilon)
+        cem = self.cem
+        if fused:
+            return nn_grid.fused_batch(self._src_np[b], self._tgt_np[b], self._src_grids[b], self._icp_grid(b), rot,
+                                       trans, cem.epsilon, cem.icp_radius, cem.icp_steps, cem.alpha)
+        return nn_grid.consensus_batch(self._src_np[b], self._tgt_np[b], self._tgt_grids[b], self._src_grids[b], rot,
+                                       trans, cem.epsilon)
 
-    def _reward_torch(self, b: int, rot: torch.Tensor, trans: torch.Tensor, icp: bool) -> torch.Tensor:
+    def _reward_torch(self, b: int, rot: torch.Tensor, trans: torch.Tensor, fused: bool) -> torch.Tensor:
         src, tgt = self.source[b].double().unsqueeze(0), self.target[b].double().unsqueeze(0)
-        if icp:
-            rot, trans = batch_icp(src, tgt, rot, trans, self.cem.icp_steps, self.cem.icp_radius)
-        return max_consensus_reward(transform_points(src, rot, trans), tgt, self.cem.epsilon)
+        now = max_consensus_reward(transform_points(src, rot, trans), tgt, self.cem.epsilon)
+        if not fused:
+            return now
+        rot, trans = batch_icp(src, tgt, rot, trans, self.cem.icp_steps, self.cem.icp_radius)
+        after = max_consensus_reward(transform_points(src, rot, trans), tgt, self.cem.epsilon)
+        return self.cem.alpha * now + (1.0 - self.cem.alpha) * after
 
 
 def refine_with_icp(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
