@@ -120,6 +120,14 @@ def _nearest_sq(qx, qy, qz, points, node_nearest, origin, dims, spacing):
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")
+def _moved(rot, trans, x, y, z):
+    """R p + t for one point."""
+    return (rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + trans[0],
+            rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + trans[1],
+            rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + trans[2])
+
+
+@numba.njit(cache=True, fastmath=True, inline="always")
 def _inlier_score(sq, eps):
     """max(0, 1 - d / eps) for a squared distance."""
     return max(0.0, 1.0 - np.sqrt(sq) / eps)
@@ -146,10 +154,7 @@ def _consensus(src, tgt_grid, tgt, src_grid, rot, trans, eps):
     pts, nodes, origin, dims, spacing = tgt_grid
     acc = 0.0
     for i in range(src.shape[0]):
-        x, y, z = src[i, 0], src[i, 1], src[i, 2]
-        qx = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + trans[0]
-        qy = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + trans[1]
-        qz = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + trans[2]
+        qx, qy, qz = _moved(rot, trans, src[i, 0], src[i, 1], src[i, 2])
         d, _ = _nearest_sq(qx, qy, qz, pts, nodes, origin, dims, spacing)
         acc += _inlier_score(d, eps)
     return acc / src.shape[0] + _reverse_score(tgt, src_grid, rot, trans, eps) / tgt.shape[0]
@@ -172,9 +177,7 @@ def _icp_step(src, grid, radius_sq, rot, trans, eps):
     s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
     for i in range(src.shape[0]):
         x0, x1, x2 = src[i, 0], src[i, 1], src[i, 2]
-        qx = rot[0, 0] * x0 + rot[0, 1] * x1 + rot[0, 2] * x2 + trans[0]
-        qy = rot[1, 0] * x0 + rot[1, 1] * x1 + rot[1, 2] * x2 + trans[1]
-        qz = rot[2, 0] * x0 + rot[2, 1] * x1 + rot[2, 2] * x2 + trans[2]
+        qx, qy, qz = _moved(rot, trans, x0, x1, x2)
         d, j = _nearest_sq(qx, qy, qz, pts, nodes, origin, dims, spacing)
         if d > radius_sq:
             continue
