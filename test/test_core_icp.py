@@ -26,3 +26,28 @@ def test_cpu_icp_refinement_converges(bracket):
     r, t = refine_with_icp(src, tgt, np.eye(3), np.zeros(3), steps=30, radius=0.2)
     np.testing.assert_allclose(r, rot, atol=1e-6)
     np.testing.assert_allclose(t, trans, atol=1e-6)
+
+
+def _kabsch(cov: np.ndarray) -> np.ndarray:
+    u, _, vt = np.linalg.svd(cov)
+    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    return vt.T @ fix @ u.T
+
+
+def test_quaternion_rotation_of_the_cpu_icp_equals_kabsch_with_reflection_fix():
+    from cemnet_ros.core.nn_grid import _best_rotation
+
+    rng = np.random.default_rng(0)
+    covariances = list(rng.normal(size=(200, 3, 3)))  # about half need the reflection fix
+    for i in range(200):  # noisy correspondences of a true motion, and flat (planar) sets
+        x = rng.normal(size=(40, 3)) * ([1.0, 1.0, 1e-3] if i % 2 else 1.0)
+        rot = euler_to_matrix(torch.tensor(rng.uniform(-np.pi, np.pi, 3))).numpy()
+        y = x @ rot.T + rng.normal(scale=0.01, size=x.shape)
+        covariances.append((x - x.mean(0)).T @ (y - y.mean(0)))
+        if i % 2 == 0:
+            np.testing.assert_allclose(_best_rotation(covariances[-1]), rot, atol=0.05)
+    for cov in covariances:
+        r = _best_rotation(cov)
+        np.testing.assert_allclose(r, _kabsch(cov), atol=1e-8)
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-10)
+        assert abs(np.linalg.det(r) - 1.0) < 1e-10

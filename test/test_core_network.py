@@ -1,19 +1,29 @@
 import numpy as np
+import pytest
 import torch
+import torch.nn.functional as F
 
 from cemnet_ros.core.checkpoint import load_network
 from cemnet_ros.core.geometry import euler_to_matrix_np
-from cemnet_ros.core.network import SamplingNetwork, edge_features
+from cemnet_ros.core.network import SamplingNetwork, dense_knn_indices, edge_features, knn_indices
 
 
 def test_edge_features_are_neighbour_then_centre():
     pts = torch.tensor([[[0.0, 0, 0], [1, 0, 0], [3, 0, 0]]])
-    feats = edge_features(pts, k=2)  # (1, 6, k=2, n=3)
+    feats = edge_features(pts, k=2)  # (1, k=2, n=3, 6)
     # Point 2's neighbours are itself and point 1.
-    neighbours = feats[0, :3, :, 2].T
-    centres = feats[0, 3:, :, 2].T
+    neighbours = feats[0, :, 2, :3]
+    centres = feats[0, :, 2, 3:]
     assert {tuple(v) for v in neighbours.tolist()} == {(3.0, 0, 0), (1.0, 0, 0)}
     assert (centres == torch.tensor([3.0, 0, 0])).all()
+
+
+def test_kdtree_and_dense_neighbours_agree():
+    points = torch.randn(2, 300, 3)
+    tree, dense = knn_indices(points, 20), dense_knn_indices(points, 20)
+    assert tree.dtype == torch.int64 and tree.shape == (2, 300, 20)
+    assert (tree.sort(-1).values == dense.sort(-1).values).all()
+    assert (tree[:, :, 0] == torch.arange(300)).all()  # each point is its own nearest neighbour
 
 
 def test_output_shapes_and_sigma_range():
@@ -47,17 +57,45 @@ def test_bundled_weights_predict_a_useful_prior(bracket):
     assert np.abs(mu0[0, 3:].numpy() - trans).max() < 0.06
 
 
-def test_folded_batchnorm_equals_the_plain_layers():
+def _randomised_network() -> SamplingNetwork:
     torch.manual_seed(0)
-    net = SamplingNetwork().eval()
+    net = SamplingNetwork()
     for module in net.modules():
         if isinstance(module, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)):
             module.running_mean.uniform_(-0.5, 0.5)
             module.running_var.uniform_(0.5, 2.0)
-            module.weight.data.uniform_(0.5, 1.5)
+            module.weight.data.uniform_(-1.5, 1.5)  # negative scales too: the max over k must still commute
             module.bias.data.uniform_(-0.2, 0.2)
+    return net
+
+
+def _reference_embedding(dgcnn, points: torch.Tensor, k: int = 20) -> torch.Tensor:
+    """The reference's own layout: edges (B, 6, n, k), Conv2d + BatchNorm2d modules + ReLU, max over k."""
+    idx = torch.cdist(points, points).topk(k, dim=-1, largest=False).indices  # (B, n, k)
+    neighbours = points[torch.arange(points.shape[0])[:, None, None], idx]
+    x = torch.cat((neighbours, points.unsqueeze(2).expand_as(neighbours)), -1).permute(0, 3, 1, 2)
+    pooled = []
+    for i in range(1, 5):
+        x = F.relu(getattr(dgcnn, f"bn{i}")(getattr(dgcnn, f"conv{i}")(x)))
+        pooled.append(x.max(dim=-1, keepdim=True)[0])
+    return F.relu(dgcnn.bn5(dgcnn.conv5(torch.cat(pooled, 1)))).squeeze(-1).transpose(1, 2)  # (B, n, C)
+
+
+@pytest.mark.parametrize("training", [False, True])
+def test_channels_last_embedding_equals_the_reference_layout(training):
+    net = _randomised_network().train(training)
+    x = torch.randn(2, 64, 3)
+    with torch.no_grad():
+        ours = net.embedding(x, net._conv_bn_relu)
+        reference = _reference_embedding(net.embedding.train(training), x)
+    torch.testing.assert_close(ours, reference, rtol=1e-4, atol=1e-4)
+
+
+def test_folded_batchnorm_equals_the_plain_layers():
+    net = _randomised_network().eval()
     x = torch.randn(1, 64, 3)
     with torch.no_grad():
         folded = net.embedding(x, net._conv_bn_relu)
-        plain = net.embedding(x, lambda conv, bn, h: torch.relu(net._norm(bn, conv(h))))
+        plain = net.embedding(x, lambda conv, bn, h: torch.relu(net._norm(
+            bn, h.reshape(-1, h.shape[-1]) @ conv.weight.flatten(1).t())).view(*h.shape[:-1], -1))
     torch.testing.assert_close(folded, plain, rtol=1e-4, atol=1e-5)

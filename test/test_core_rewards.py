@@ -69,3 +69,20 @@ def test_cpu_and_torch_scorers_agree_on_fused_costs(bracket):
     for fused, tolerance in ((False, 1e-3), (True, 1e-2)):
         fast, exact = cpu.cost(candidates, fused), brute.cost(candidates, fused)
         torch.testing.assert_close(fast, exact, atol=tolerance, rtol=0)
+
+
+def test_cpu_costs_do_not_depend_on_the_order_of_the_points(bracket):
+    """The scorer reorders clouds along a Z-order curve for speed: a permutation, so the costs stay the same."""
+    from cemnet_ros.core.config import CEMConfig
+    from cemnet_ros.core.scoring import CandidateScorer
+
+    order = nn_grid.locality_order(bracket)
+    assert np.array_equal(np.sort(order), np.arange(len(bracket)))
+    src = torch.tensor(bracket[:500], dtype=torch.float32)[None]
+    tgt = torch.tensor(bracket[100:600] + 0.01, dtype=torch.float32)[None]
+    shuffle = torch.from_numpy(np.random.default_rng(0).permutation(500))
+    candidates = torch.randn(1, 32, 6, generator=torch.Generator().manual_seed(0)) * 0.05
+    for fused in (False, True):
+        torch.testing.assert_close(CandidateScorer(src, tgt, CEMConfig()).cost(candidates, fused),
+                                   CandidateScorer(src[:, shuffle], tgt[:, shuffle.flip(0)], CEMConfig()).cost(
+                                       candidates, fused), atol=1e-6, rtol=0)

@@ -13,6 +13,7 @@ from .checkpoint import load_network
 from .config import RegistrationConfig
 from .engine import CEMNet
 from .geometry import euler_to_matrix_np, matrix_to_action_np
+from . import nn_grid
 from .scoring import consensus_fitness, refine_with_icp
 
 NETWORK_MIN_POINTS = 20  # the network's k-NN graph
@@ -76,6 +77,8 @@ class Registrar:
             network = load_network(self.config.weights, self.config.allow_pickle)
             network.batch_stats_at_inference = self.config.batchnorm == "batch"
         self.engine = CEMNet(self.config.cem, network, self.config.prior_sigma).to(self.device).eval()
+        if self.device.type == "cpu":
+            nn_grid.compile_kernels()
 
     def _generator(self) -> torch.Generator | None:
         if self.config.cem.seed is None:
