@@ -18,7 +18,7 @@ from cemnet_ros.core.checkpoint import load_network
 from cemnet_ros.core.config import CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
 from cemnet_ros.tools import train_cli
-from cemnet_ros.train.config import TrainConfig
+from cemnet_ros.train.config import TrainConfig, epoch_learning_rate
 from cemnet_ros.train.data import PairDataset, build_datasets, drop_duplicates, load_scan_shapes, split_train_val
 from cemnet_ros.train.trainer import Trainer
 
@@ -177,12 +177,20 @@ def test_checkpoint_round_trip(trained):
     trainer.network.train()
 
 
+def test_cosine_schedule_decays_from_lr_to_a_hundredth():
+    config = TrainConfig(lr=1e-3, epochs=11, lr_schedule="cosine")
+    rates = [epoch_learning_rate(config, e) for e in range(1, 12)]
+    assert rates[0] == pytest.approx(1e-3) and rates[-1] == pytest.approx(1e-5)
+    assert rates[5] == pytest.approx(0.5 * (1e-3 + 1e-5)) and all(np.diff(rates) < 0)
+    assert epoch_learning_rate(replace(config, lr_schedule="constant"), 7) == 1e-3
+
+
 def test_resume_continues_and_matches_an_uninterrupted_run(shapes_npz, tmp_path):
-    straight = Trainer(tiny_config(shapes_npz, tmp_path / "straight", epochs=2))
+    straight = Trainer(tiny_config(shapes_npz, tmp_path / "straight", epochs=2, lr_schedule="cosine"))
     straight.fit()
-    first = Trainer(tiny_config(shapes_npz, tmp_path / "resumed", epochs=1))
+    first = Trainer(tiny_config(shapes_npz, tmp_path / "resumed", epochs=1, lr_schedule="cosine"))
     first.fit()
-    resumed = Trainer(tiny_config(shapes_npz, tmp_path / "resumed", epochs=2, resume=True))
+    resumed = Trainer(tiny_config(shapes_npz, tmp_path / "resumed", epochs=2, resume=True, lr_schedule="cosine"))
     assert resumed.epoch == 1 and resumed.global_step == first.global_step
     for key, value in first.optimizer.state_dict()["state"][0].items():
         assert torch.equal(value, resumed.optimizer.state_dict()["state"][0][key]), key
@@ -213,7 +221,8 @@ def test_time_budget_stops_after_a_validated_epoch(shapes_npz, tmp_path):
 
 
 def test_config_rejects_bad_values():
-    for bad in (dict(batch_size=1), dict(val_fraction=1.0), dict(best_metric="accuracy"), dict(max_minutes=0)):
+    for bad in (dict(batch_size=1), dict(val_fraction=1.0), dict(best_metric="accuracy"), dict(max_minutes=0),
+                dict(lr_schedule="step")):
         with pytest.raises(ValueError):
             TrainConfig(**bad)
 

@@ -15,7 +15,7 @@ from typing import Optional, Sequence
 from cemnet_ros.core.checkpoint import CheckpointError
 from cemnet_ros.eval.protocol import ProtocolConfig
 from cemnet_ros.train import distributed as ddp
-from cemnet_ros.train.config import BEST_METRICS, CPU_PRESET, TrainConfig, cpu_preset
+from cemnet_ros.train.config import BEST_METRICS, CPU_PRESET, LR_SCHEDULES, TrainConfig, cpu_preset
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=int, help="paper: 50")
     p.add_argument("--batch-size", type=int, help="global batch (split over DDP ranks)")
     p.add_argument("--lr", type=float, help="Adam learning rate (paper: 1e-4)")
+    p.add_argument("--lr-schedule", choices=LR_SCHEDULES, help="constant (paper) or cosine (to lr/100)")
     p.add_argument("--weight-decay", type=float, help="Adam weight decay (paper: 5e-4)")
     p.add_argument("--n-candidates", type=int, help="CEM candidates N while training")
     p.add_argument("--n-iters", type=int, help="CEM iterations T while training")
@@ -69,7 +70,8 @@ def config_from_args(args: argparse.Namespace, device_type: str) -> TrainConfig:
     preset = args.preset if args.preset != "auto" else ("paper" if device_type == "cuda" else "cpu")
     config = cpu_preset(base) if preset == "cpu" else base
     overrides = {name: value for name, value in (("epochs", args.epochs), ("batch_size", args.batch_size),
-                                                 ("lr", args.lr), ("weight_decay", args.weight_decay))
+                                                 ("lr", args.lr), ("lr_schedule", args.lr_schedule),
+                                                 ("weight_decay", args.weight_decay))
                  if value is not None}
     cem = {k: v for k, v in (("n_candidates", args.n_candidates), ("n_iters", args.n_iters)) if v is not None}
     val_cem = {"n_candidates": args.val_n_candidates} if args.val_n_candidates is not None else {}

@@ -8,6 +8,7 @@ test-time exploration blend. :func:`cpu_preset` gives the settings measured to b
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Optional
 
@@ -16,6 +17,7 @@ from cemnet_ros.eval.protocol import ProtocolConfig
 
 
 BEST_METRICS = ("val_mae_r_deg", "val_prior_mae_r_deg", "val_loss")
+LR_SCHEDULES = ("constant", "cosine")
 
 
 def _train_cem() -> CEMConfig:
@@ -33,6 +35,9 @@ class TrainConfig:
     epochs: int = 50
     batch_size: int = 32  # global batch; split evenly over DDP ranks
     lr: float = 1e-4
+    # "constant" (the paper) or "cosine": lr decays per epoch to lr / 100 at the last epoch, so that short runs
+    # end with small steps and settled BatchNorm running statistics.
+    lr_schedule: str = "constant"
     weight_decay: float = 5e-4
     loss_mu: float = 0.01  # Geman-McClure scale
     prior_loss_weight: float = 1.0  # weight of the loss on the prior alignment mu0 (paper: 1)
@@ -75,6 +80,8 @@ class TrainConfig:
             raise ValueError("val_fraction must lie in (0, 1)")
         if self.val_every < 1:
             raise ValueError("val_every must be >= 1")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"lr_schedule must be one of {LR_SCHEDULES}, not {self.lr_schedule!r}")
         if self.val_batchnorm not in ("running", "batch"):
             raise ValueError(f"val_batchnorm must be 'running' or 'batch', not {self.val_batchnorm!r}")
         if self.best_metric not in BEST_METRICS:
@@ -96,7 +103,7 @@ class TrainConfig:
 # about 30 s of CPU (60 s of wall time on the loaded machine), so the CPU preset takes 4x smaller batches
 # (4x more optimiser steps per hour) with the reference code's learning rate 1e-3 (the paper states 1e-4,
 # too slow for a few hundred steps), and a cheaper validation CEM (N = 300; the fused reward stays on).
-CPU_PRESET = dict(batch_size=8, lr=1e-3, n_candidates=300, n_iters=10, val_n_candidates=300)
+CPU_PRESET = dict(batch_size=8, lr=1e-3, lr_schedule="cosine", n_candidates=300, n_iters=10, val_n_candidates=300)
 
 
 def cpu_preset(config: TrainConfig) -> TrainConfig:
@@ -105,6 +112,16 @@ def cpu_preset(config: TrainConfig) -> TrainConfig:
         config,
         batch_size=CPU_PRESET["batch_size"],
         lr=CPU_PRESET["lr"],
+        lr_schedule=CPU_PRESET["lr_schedule"],
         cem=replace(config.cem, n_candidates=CPU_PRESET["n_candidates"], n_iters=CPU_PRESET["n_iters"]),
         val_cem=replace(config.val_cem, n_candidates=CPU_PRESET["val_n_candidates"]),
     )
+
+
+def epoch_learning_rate(config: TrainConfig, epoch: int) -> float:
+    """Learning rate of epoch ``epoch`` (1-based): constant, or cosine from lr down to lr / 100 at the last epoch."""
+    if config.lr_schedule == "constant" or config.epochs == 1:
+        return config.lr
+    progress = (epoch - 1) / (config.epochs - 1)
+    low = config.lr / 100.0
+    return low + 0.5 * (config.lr - low) * (1.0 + math.cos(math.pi * progress))

@@ -34,7 +34,7 @@ from cemnet_ros.io.atomic import atomic_write_bytes, atomic_write_text
 
 from . import distributed as ddp
 from .checkpoints import load_checkpoint, save_checkpoint
-from .config import TrainConfig
+from .config import TrainConfig, epoch_learning_rate
 from .data import build_datasets
 
 CSV_FIELDS = ("epoch", "global_step", "train_loss", "train_loss_final", "train_loss_prior", "skipped_batches",
@@ -210,6 +210,8 @@ class Trainer:
         run_start = time.perf_counter()
         for epoch in range(self.epoch + 1, cfg.epochs + 1):
             start = time.perf_counter()
+            for group in self.optimizer.param_groups:
+                group["lr"] = epoch_learning_rate(cfg, epoch)
             row: dict[str, Any] = {"epoch": epoch, **self.train_epoch(epoch)}
             train_time = time.perf_counter() - start
             row.update(global_step=self.global_step, lr=self.optimizer.param_groups[0]["lr"],
