@@ -130,13 +130,13 @@ def cemnet_process():
     return aligner.process, aligner
 
 
-def icp_process(voxel: float):
-    """Plain sequential point-to-point ICP odometry on the same voxel grid (scipy k-d tree, identity init)."""
+def icp_process(voxel: float, scale: float):
+    """Plain sequential point-to-point ICP odometry on the pipeline's voxel grid (scipy k-d tree, identity init)."""
     from cemnet_ros.eval.baselines import ICPConfig, icp
     from cemnet_ros.pipeline.preprocess import voxel_downsample
 
     state = {"prev": None}
-    config = ICPConfig(max_iterations=30, max_distance=3.0 * voxel)
+    config = ICPConfig(max_iterations=30, max_distance=3.0 * (voxel if voxel > 0 else scale / 100.0))
 
     def process(points: np.ndarray, stamp_ns: int) -> None:
         cloud = voxel_downsample(points, voxel)
@@ -167,13 +167,12 @@ def main(argv: list[str] | None = None) -> int:
     process, aligner = cemnet_process()
     process(scans[0], 0)  # warm-up: loads weights, compiles the numba kernels
     process(scans[1], 100_000_000)
-    scale = aligner.scale
+    voxel, scale = aligner.voxel, aligner.scale
     aligner.reset()
     results = [run_stream("CEMNet", process, scans, args.rate, args.duration, args.queue_size)]
     print(results[0].summary(args.rate), flush=True)
     if not args.no_baseline:
-        voxel = aligner.config.voxel_size if aligner.config.voxel_size > 0 else scale / 100.0
-        results.append(run_stream("ICP", icp_process(voxel), scans, args.rate, args.duration, args.queue_size))
+        results.append(run_stream("ICP", icp_process(voxel, scale), scans, args.rate, args.duration, args.queue_size))
         print(results[1].summary(args.rate))
         if results[1].rate_hz > 0:
             print(f"CEMNet / ICP sustained rate: {results[0].rate_hz / results[1].rate_hz:.2f}x")

@@ -166,6 +166,10 @@ def test_params_file_lists_every_parameter_and_loads(context):
     node = AlignNode(context=context, cli_args=["--ros-args", "--params-file", str(path), "-p", "n_iters:=7"])
     try:
         assert node.get_parameter("n_iters").value == 7 and node.get_parameter("mode").value == "sequential"
+        cem = node._config.registration.cem  # the parameters reach the pipeline's config
+        assert (cem.n_iters, cem.n_fused_iters, cem.n_candidates) == (7, min(params["n_fused_iters"], 7),
+                                                                       params["n_candidates"])
+        assert node._config.registration.weights is None and node._config.voxel_size == params["voxel_size"]
         result = node.set_parameters([Parameter("n_points", value=100)])[0]  # read-only after start-up
         assert not result.successful and node.get_parameter("n_points").value == 768
     finally:

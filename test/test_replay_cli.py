@@ -17,7 +17,8 @@ import pytest
 
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
-from cemnet_ros.tools.replay_cli import build_config, load_params, main
+from cemnet_ros.pipeline.params import aligner_config_from_params as build_config
+from cemnet_ros.tools.replay_cli import load_params, main
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"

@@ -148,6 +148,11 @@ class ScanAligner:
         """Metres per network unit (None until the first target fixed it in auto mode)."""
         return self._scale
 
+    @property
+    def voxel(self) -> float:
+        """Voxel size (m) of the last preprocessed cloud; 0 = no voxel grid, or nothing preprocessed yet."""
+        return self._voxel
+
     def reset(self) -> None:
         """Forget the reference scan, the pose and the motion model (the auto scale is measured again)."""
         self._scale = self._fixed_scale

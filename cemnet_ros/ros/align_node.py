@@ -28,8 +28,8 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
-from cemnet_ros.core import CEMConfig, RegistrationConfig
 from cemnet_ros.pipeline.aligner import PRIORS, AlignerConfig, AlignmentStep, ScanAligner, ScanRejected
+from cemnet_ros.pipeline.params import aligner_config_from_params
 from cemnet_ros.pipeline.worker import BoundedWorker
 from cemnet_ros.pointcloud2 import CloudError, decode_xyz, make_pointcloud2
 
@@ -139,17 +139,8 @@ class AlignNode(Node):
         _choice("qos_reliability", p["qos_reliability"], RELIABILITIES)
         self._odom_frame, self._base_frame = p["odom_frame"], p["base_frame"]
         self._pair_tolerance_ns = int(p["pair_tolerance"] * 1e9)
-        self._config = AlignerConfig(
-            registration=RegistrationConfig(
-                cem=CEMConfig(n_candidates=p["n_candidates"], n_iters=p["n_iters"],
-                              n_fused_iters=min(p["n_fused_iters"], p["n_iters"]), epsilon=p["epsilon"]),
-                n_points=p["n_points"], weights=p["weights"] or None, allow_pickle=p["allow_pickle"],
-                device=p["device"]),
-            prior=_choice("prior", p["prior"], PRIORS), prior_sigma_rotation=p["prior_sigma_rotation"],
-            prior_sigma_translation=p["prior_sigma_translation"], identity_sigma=p["identity_sigma"],
-            scale=p["scale"], voxel_size=p["voxel_size"], min_range=p["min_range"], max_range=p["max_range"],
-            refine_iters=p["refine_iters"], refine_points=p["refine_points"],
-            fitness_threshold=p["fitness_threshold"])
+        _choice("prior", p["prior"], PRIORS)
+        self._config = aligner_config_from_params(p)  # node-only names (topics, QoS, ...) are ignored there
         self._aligner = ScanAligner(self._config)
 
         self._lock = threading.Lock()  # counters and pairing buffers

@@ -11,11 +11,10 @@ against the ground truth, per-pair errors, latency and throughput.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
@@ -24,6 +23,7 @@ import yaml
 from tqdm import tqdm
 
 from cemnet_ros.io.atomic import atomic_write_text
+from cemnet_ros.pipeline.params import aligner_config_from_params
 from cemnet_ros.replay.bag_io import BagError, BagReader, BagWriter
 from cemnet_ros.replay.trajectory import (absolute_trajectory_error, associate, relative_pose_errors,
                                           write_tum)
@@ -40,38 +40,6 @@ OVERRIDES = {
 
 
 # ---------------------------------------------------------------------------------------------- config
-def _apply(obj: Any, values: dict[str, Any], where: str) -> Any:
-    """dataclasses.replace with nested names resolved: AlignerConfig -> .registration -> .registration.cem."""
-    own = {f.name for f in fields(obj)}
-    mine = {k: v for k, v in values.items() if k in own and not dataclasses.is_dataclass(getattr(obj, k))}
-    rest = {k: v for k, v in values.items() if k not in mine}
-    nested = {}
-    for f in fields(obj):
-        child = getattr(obj, f.name)
-        if dataclasses.is_dataclass(child):
-            sub = dict(rest.pop(f.name, {}) or {})
-            names = _all_names(child)
-            sub.update({k: rest.pop(k) for k in list(rest) if k in names})
-            if sub:
-                nested[f.name] = _apply(child, sub, f"{where}.{f.name}")
-    if rest:
-        raise ValueError(f"unknown {where} parameter(s): {sorted(rest)}")
-    for k, v in mine.items():
-        if isinstance(getattr(obj, k), tuple) and isinstance(v, list):
-            mine[k] = tuple(v)
-    return dataclasses.replace(obj, **mine, **nested)
-
-
-def _all_names(obj: Any) -> set[str]:
-    names = set()
-    for f in fields(obj):
-        names.add(f.name)
-        child = getattr(obj, f.name)
-        if dataclasses.is_dataclass(child):
-            names |= _all_names(child)
-    return names
-
-
 def load_params(path: Optional[Path]) -> dict[str, Any]:
     """Parameters from a YAML file: a flat mapping or ROS style ``<node>: {ros__parameters: {...}}``."""
     if path is None:
@@ -88,21 +56,6 @@ def load_params(path: Optional[Path]) -> dict[str, Any]:
     for key, value in data.items():
         flat[str(key).split(".")[-1]] = value
     return flat
-
-
-def build_config(params: dict[str, Any]):
-    """AlignerConfig from flat parameter names, mapped as align_node does (node-only names are ignored)."""
-    from cemnet_ros.pipeline.aligner import AlignerConfig
-
-    base = AlignerConfig()
-    known = _all_names(base)
-    values = {k: v for k, v in params.items() if k in known}
-    if values.get("weights") == "":  # ROS parameter files cannot hold None: '' = package weights
-        values["weights"] = None
-    if "n_iters" in values:  # as align_node: --n-iters 2 alone stays valid
-        fused = values.get("n_fused_iters", base.registration.cem.n_fused_iters)
-        values["n_fused_iters"] = min(int(fused), int(values["n_iters"]))
-    return _apply(base, values, "AlignerConfig")
 
 
 # ---------------------------------------------------------------------------------------------- replay
@@ -239,7 +192,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     try:
         params = load_params(args.config)
         params.update({k: getattr(args, k) for k in OVERRIDES if getattr(args, k) is not None})
-        config = build_config(params)
+        config = aligner_config_from_params(params)
     except (OSError, ValueError, TypeError, yaml.YAMLError) as err:
         print(f"cemnet-replay: bad configuration: {err}", file=sys.stderr)
         return 2
