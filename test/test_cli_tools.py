@@ -149,3 +149,25 @@ def test_register_errors(tmp_path, capsys):
     assert "points" in capsys.readouterr().err
     assert register_cli.main([str(tmp_path / "ok.npy"), str(tmp_path / "ok.npy"), "--scale", "abc"]) == 2
     assert "--scale" in capsys.readouterr().err
+
+
+def test_ablation_table_script(shapes_npz, random_weights, tmp_path, capsys):
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "ablation_table.py"
+    spec = importlib.util.spec_from_file_location("ablation_table", path)
+    ablation = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ablation)
+    assert ablation.main(["--data", str(shapes_npz), "--weights", str(random_weights), "--settings", "clean,unseen",
+                          "--limit", "1", "--out", str(tmp_path)]) == 0
+    results = json.loads((tmp_path / "ablation.json").read_text())
+    assert set(results) == {"clean", "unseen"}
+    rows = results["clean"]
+    assert list(rows) == ["CEMNet, project weights", "no sampling network, prior N(0, I)",
+                          "sampling network alone (mu0), project weights",
+                          "CEM without future reward (M = 0), project weights"]
+    assert all(r["n_pairs"] == 1 and 0.0 <= r["recall"] <= 1.0 for r in rows.values())
+    assert (tmp_path / "ablation.md").read_text().count("\n| clean |") == 4
+    assert ablation.main(["--data", str(shapes_npz), "--official-dir", str(tmp_path / "none"), "--settings", "clean",
+                          "--out", str(tmp_path)]) == 2
