@@ -81,3 +81,12 @@ def test_convert_weights_cli_round_trip(tmp_path):
     for key, value in net.state_dict().items():
         torch.testing.assert_close(converted[key], value)
     assert main([str(tmp_path / "missing.pth"), str(tmp_path / "x.npz")]) == 2
+
+
+def test_official_alias_loads_the_converted_official_weights():
+    from cemnet_ros.core.checkpoint import OFFICIAL_WEIGHTS
+
+    by_alias, by_path = load_network("official").state_dict(), load_network(OFFICIAL_WEIGHTS).state_dict()
+    assert all(torch.equal(by_alias[k], by_path[k]) for k in by_path)
+    default = load_network(None).state_dict()
+    assert not all(torch.equal(default[k], by_path[k]) for k in by_path)  # the default is the project's own

@@ -25,3 +25,4 @@ def test_colcon_build_installs_the_node_and_tools(tmp_path):
     assert (install / "share" / "cemnet_ros" / "package.xml").is_file()
     assert (install / "share" / "cemnet_ros" / "config" / "align_node.yaml").is_file()
     assert list(install.rglob("weights/official_modelnet40_clean.npz"))
+    assert list(install.rglob("weights/cemnet_ros_modelnet40_clean.npz"))

@@ -19,8 +19,10 @@ import torch
 from .network import SamplingNetwork
 
 PACKAGE_WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-# The weights `register` uses when none are given (see cemnet_ros/weights/README.md).
-DEFAULT_WEIGHTS = PACKAGE_WEIGHTS_DIR / "official_modelnet40_clean.npz"
+# The weights `register` uses when none are given: this project's, trained by cemnet-train on the ModelNet40
+# subset (see cemnet_ros/weights/README.md). The official clean checkpoint, converted, ships beside them.
+DEFAULT_WEIGHTS = PACKAGE_WEIGHTS_DIR / "cemnet_ros_modelnet40_clean.npz"
+OFFICIAL_WEIGHTS = PACKAGE_WEIGHTS_DIR / "official_modelnet40_clean.npz"
 
 _OFFICIAL_PREFIXES = (("coarse_policy.emb_nn.", "embedding."), ("coarse_policy.nn.", "sigma_head."))
 _OFFICIAL_IGNORED = ("coarse_policy.reflect",)
@@ -98,8 +100,10 @@ def load_weights(path: str | os.PathLike, allow_pickle: bool = False) -> tuple[d
 
 
 def load_network(path: str | os.PathLike | None = None, allow_pickle: bool = False) -> SamplingNetwork:
-    """A :class:`SamplingNetwork` with weights from ``path`` (None = the package's default weights)."""
-    state, _ = load_weights(DEFAULT_WEIGHTS if path is None else path, allow_pickle)
+    """A :class:`SamplingNetwork` with weights from ``path``: a file, None (the package's default weights) or
+    ``"official"`` (the official ModelNet40 clean checkpoint, converted, shipped in the package)."""
+    path = DEFAULT_WEIGHTS if path is None else OFFICIAL_WEIGHTS if str(path) == "official" else path
+    state, _ = load_weights(path, allow_pickle)
     network = SamplingNetwork()
     try:
         missing, unexpected = network.load_state_dict(state, strict=False)

@@ -63,7 +63,8 @@ class RegistrationConfig:
     # the paper's no-network ablation uses N(0, I)).
     prior: str = "network"
     prior_sigma: Six = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    # Weights: None = the package's own weights; a path to a .npz (safe format) or an official .pth.
+    # Weights: None = the package's own weights; "official" = the official clean checkpoint shipped converted;
+    # a path to a .npz (safe format) or an official .pth.
     weights: Optional[str] = None
     # Official .pth checkpoints are pickles: loading them needs this explicit opt-in.
     allow_pickle: bool = False

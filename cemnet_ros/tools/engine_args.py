@@ -17,8 +17,8 @@ def add_engine_args(parser: argparse.ArgumentParser) -> None:
     """Add --weights, --allow-pickle, --prior, --batchnorm, --seed and the CEM overrides to ``parser``."""
     group = parser.add_argument_group("CEMNet engine")
     group.add_argument("--weights", default=None,
-                       help="network weights: a safe .npz or an official .pth (needs --allow-pickle); "
-                            "default: the package's weights")
+                       help="network weights: a safe .npz, an official .pth (needs --allow-pickle), or 'official' "
+                            "(the official clean checkpoint shipped converted); default: the package's own weights")
     group.add_argument("--allow-pickle", action="store_true",
                        help="allow loading pickled official .pth checkpoints (only for files you trust)")
     group.add_argument("--prior", choices=("network", "identity"), default="network",
