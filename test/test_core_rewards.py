@@ -86,3 +86,15 @@ def test_cpu_costs_do_not_depend_on_the_order_of_the_points(bracket):
         torch.testing.assert_close(CandidateScorer(src, tgt, CEMConfig()).cost(candidates, fused),
                                    CandidateScorer(src[:, shuffle], tgt[:, shuffle.flip(0)], CEMConfig()).cost(
                                        candidates, fused), atol=1e-6, rtol=0)
+
+
+def test_non_finite_candidates_get_the_worst_cost(bracket):
+    from cemnet_ros.core.config import CEMConfig
+    from cemnet_ros.core.scoring import CandidateScorer
+
+    cloud = torch.tensor(bracket[:300], dtype=torch.float32)[None]
+    candidates = torch.zeros(1, 4, 6)
+    candidates[0, 1, 0], candidates[0, 2, 4], candidates[0, 3, 5] = float("nan"), float("inf"), -float("inf")
+    for fused in (False, True):
+        cost = CandidateScorer(cloud, cloud, CEMConfig()).cost(candidates, fused)
+        assert cost[0, 0] < 0.01 and torch.equal(cost[0, 1:], torch.full((3,), 2.0))

@@ -43,12 +43,16 @@ class CandidateScorer:
         """(B, N, 6) -> (B, N) cost 2 - reward; ``fused``: alpha * now + (1 - alpha) * after ICP."""
         fused = fused and self.cem.icp_steps > 0
         with torch.no_grad():
-            rot, trans = action_to_rt(candidates.detach().double())
+            # A non-finite candidate (from a diverged mu/sigma) would index the lattice at random: score it as
+            # the worst motion instead (reward 0).
+            finite = torch.isfinite(candidates.detach()).all(-1)
+            rot, trans = action_to_rt(torch.where(finite.unsqueeze(-1), candidates.detach(), 0.0).double())
             if self.on_cpu:
                 reward = torch.from_numpy(np.stack([self._reward_cpu(b, rot[b].numpy(), trans[b].numpy(), fused)
                                                     for b in range(rot.shape[0])]))
             else:
                 reward = torch.stack([self._reward_torch(b, rot[b], trans[b], fused) for b in range(rot.shape[0])])
+            reward = torch.where(finite.to(reward.device), reward, 0.0)
         return (2.0 - reward).to(candidates.dtype)
 
     def _reward_cpu(self, b: int, rot: np.ndarray, trans: np.ndarray, fused: bool) -> np.ndarray:
