@@ -99,7 +99,8 @@ class TrainConfig:
 
 
 # Measured on 2 shared CPU cores (docs/training.md): the DGCNN forward/backward dominates (about 0.5 s of CPU
-# per pair), the CEM adds ~10 % at N = 300 and ~35-50 % at N = 1000. A paper batch (32 pairs, N = 1000) costs
+# per pair with the reference's Conv2d layout; ~3x less since it runs as channels-last matrix products: an epoch
+# of this preset now takes ~65 s on the idle machine), the CEM adds ~10 % at N = 300 and ~35-50 % at N = 1000. A paper batch (32 pairs, N = 1000) costs
 # about 30 s of CPU (60 s of wall time on the loaded machine), so the CPU preset takes 4x smaller batches
 # (4x more optimiser steps per hour) with the reference code's learning rate 1e-3 (the paper states 1e-4,
 # too slow for a few hundred steps), and a cheaper validation CEM (N = 300; the fused reward stays on).
