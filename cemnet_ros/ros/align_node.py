@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
-from cemnet_ros.pipeline.aligner import PRIORS, AlignerConfig, AlignmentStep, ScanAligner, ScanRejected
+from cemnet_ros.pipeline.aligner import AlignerConfig, AlignmentStep, ScanAligner, ScanRejected
 from cemnet_ros.pipeline.params import aligner_config_from_params
 from cemnet_ros.pipeline.worker import BoundedWorker
 from cemnet_ros.pointcloud2 import CloudError, decode_xyz, make_pointcloud2
@@ -139,8 +139,7 @@ class AlignNode(Node):
         _choice("qos_reliability", p["qos_reliability"], RELIABILITIES)
         self._odom_frame, self._base_frame = p["odom_frame"], p["base_frame"]
         self._pair_tolerance_ns = int(p["pair_tolerance"] * 1e9)
-        _choice("prior", p["prior"], PRIORS)
-        self._config = aligner_config_from_params(p)  # node-only names (topics, QoS, ...) are ignored there
+        self._config = aligner_config_from_params(p)  # validates prior & co.; node-only names are ignored there
         self._aligner = ScanAligner(self._config)
 
         self._lock = threading.Lock()  # counters and pairing buffers
