@@ -28,9 +28,10 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
+from cemnet_ros.data.shared import shared_dir  # noqa: E402
 from cemnet_ros.pipeline.worker import BoundedWorker  # noqa: E402
 
-KITTI = REPO.parent / "shared" / "data" / "kitti_sample" / "velodyne"
+KITTI = (shared_dir() or REPO.parent / "shared") / "data" / "kitti_sample" / "velodyne"
 
 
 def kitti_scans() -> list[np.ndarray]:
@@ -40,7 +41,7 @@ def kitti_scans() -> list[np.ndarray]:
 
 def synthetic_scans(n: int = 6) -> list[np.ndarray]:
     """HDL-64-like scans (~124k points) of the synthetic courtyard along its smooth path."""
-    from scripts.make_bags import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory
+    from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory
 
     lidar = LidarModel(n_beams=64, n_azimuth=1940, elevation_deg=(-24.8, 2.0))
     scene, rng = courtyard_scene(), np.random.default_rng(0)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cemnet_ros.data import scenes
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
 from cemnet_ros.pipeline.params import aligner_config_from_params as build_config
@@ -37,30 +38,28 @@ def _make_bags_module():
 @pytest.fixture(scope="module")
 def tiny_bag(tmp_path_factory) -> Path:
     """4 ray-cast scans (16 beams x 360 steps) of the synthetic courtyard with ground truth."""
-    mb = _make_bags_module()
-    scene, lidar = mb.courtyard_scene(), mb.LidarModel(n_beams=16, n_azimuth=360)
+    scene, lidar = scenes.courtyard_scene(), scenes.LidarModel(n_beams=16, n_azimuth=360)
     rng = np.random.default_rng(3)
-    frames = [(mb.lidar_scan(scene, pose, lidar, rng), pose) for pose in mb.synthetic_trajectory(4)]
+    frames = [(scenes.lidar_scan(scene, pose, lidar, rng), pose) for pose in scenes.synthetic_trajectory(4)]
     path = tmp_path_factory.mktemp("bags") / "tiny.mcap"
-    mb.write_bag(path, frames, "lidar", 100_000_000)
+    _make_bags_module().write_bag(path, frames, "lidar", 100_000_000)
     return path
 
 
 def test_make_bags_synthetic_ground_truth_convention():
     """GT is T_world_sensor: scan points moved by it land on the scene (ground at z = 0, nothing below)."""
-    mb = _make_bags_module()
-    scene, lidar = mb.courtyard_scene(), mb.LidarModel(n_beams=16, n_azimuth=360)
-    poses = mb.synthetic_trajectory(6)
+    scene, lidar = scenes.courtyard_scene(), scenes.LidarModel(n_beams=16, n_azimuth=360)
+    poses = scenes.synthetic_trajectory(6)
     steps = [np.linalg.inv(a) @ b for a, b in zip(poses[:-1], poses[1:])]
     assert all(0.5 <= np.linalg.norm(s[:3, 3]) <= 1.0 for s in steps)  # ~0.7 m and a few degrees per scan
     for pose in (poses[0], poses[5]):
-        scan = mb.lidar_scan(scene, pose, lidar, np.random.default_rng(0))
+        scan = scenes.lidar_scan(scene, pose, lidar, np.random.default_rng(0))
         world = scan @ pose[:3, :3].T + pose[:3, 3]
         assert world[:, 2].min() > -0.05
         assert np.mean(np.abs(world[:, 2]) < 0.04) > 0.3  # the ground ring
     # Seeded: the same call gives the same scan.
-    a = mb.lidar_scan(scene, poses[1], lidar, np.random.default_rng(7))
-    b = mb.lidar_scan(scene, poses[1], lidar, np.random.default_rng(7))
+    a = scenes.lidar_scan(scene, poses[1], lidar, np.random.default_rng(7))
+    b = scenes.lidar_scan(scene, poses[1], lidar, np.random.default_rng(7))
     np.testing.assert_array_equal(a, b)
 
 

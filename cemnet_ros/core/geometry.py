@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 
 def euler_to_matrix(angles: torch.Tensor) -> torch.Tensor:
@@ -80,3 +81,24 @@ def rotation_angle_deg(rotation_a: np.ndarray, rotation_b: np.ndarray) -> float:
     """Geodesic angle (degrees) between two rotation matrices."""
     cos = (np.trace(np.asarray(rotation_a).T @ np.asarray(rotation_b)) - 1.0) / 2.0
     return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def rotation_angle_rad(rotation: np.ndarray) -> float:
+    """Geodesic angle (radians) of one rotation matrix: its distance to the identity."""
+    cos = (np.trace(np.asarray(rotation, dtype=np.float64)) - 1.0) / 2.0
+    return float(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def so3_exp(rotvec: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a rotation vector (Rodrigues)."""
+    return Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64)).as_matrix()
+
+
+def so3_log(rotation: np.ndarray) -> np.ndarray:
+    """Rotation vector of a rotation matrix."""
+    return Rotation.from_matrix(np.asarray(rotation, dtype=np.float64)).as_rotvec()
+
+
+def apply_transform(T_target_source: np.ndarray, points_source: np.ndarray) -> np.ndarray:
+    """(n, 3) points of the source frame expressed in the target frame: R p + t."""
+    return points_source @ T_target_source[:3, :3].T + T_target_source[:3, 3]

@@ -26,17 +26,15 @@ class CandidateScorer:
         self.source, self.target = source.detach(), target.detach()
         self.on_cpu = source.device.type == "cpu"
         if self.on_cpu:  # rewards are sums over points: any order gives them, Z-order gives them fastest
-            self._src_np = [_in_locality_order(s) for s in self.source.double().numpy()]
-            self._tgt_np = [_in_locality_order(t) for t in self.target.double().numpy()]
             spacing = cem.epsilon * LATTICE_SPACING
-            self._src_grids = [nn_grid.build_grid(s, cem.epsilon, spacing).astuple() for s in self._src_np]
-            self._tgt_grids = [nn_grid.build_grid(t, cem.epsilon, spacing).astuple() for t in self._tgt_np]
+            self._src_np, self._src_grids = _prepare_each(self.source, cem.epsilon, spacing)
+            self._tgt_np, self._tgt_grids = _prepare_each(self.target, cem.epsilon, spacing)
             self._icp_grids: list | None = None  # built on the first fused iteration only
 
     def _icp_grid(self, b: int):
         if self._icp_grids is None:
             spacing = self.cem.epsilon * LATTICE_SPACING
-            self._icp_grids = [nn_grid.build_grid(t, self.cem.icp_radius, spacing).astuple() for t in self._tgt_np]
+            _, self._icp_grids = _prepare_each(self.target, self.cem.icp_radius, spacing, self._tgt_np)
         return self._icp_grids[b]
 
     def cost(self, candidates: torch.Tensor, fused: bool) -> torch.Tensor:
@@ -72,6 +70,23 @@ class CandidateScorer:
         rot, trans = batch_icp(src, tgt, rot, trans, self.cem.icp_steps, self.cem.icp_radius)
         after = max_consensus_reward(transform_points(src, rot, trans), tgt, self.cem.epsilon)
         return self.cem.alpha * now + (1.0 - self.cem.alpha) * after
+
+
+def _prepare_each(clouds: torch.Tensor, radius: float, spacing: float, ordered: list | None = None
+                  ) -> tuple[list, list]:
+    """Z-ordered float64 copies of a batch's clouds and their lattices; built once for a broadcast batch.
+
+    A batch made by ``expand`` (stride 0: every pair shares one cloud, e.g. hypotheses of one scan pair)
+    gets one lattice, referenced B times.
+    """
+    shared = clouds.shape[0] > 1 and clouds.stride(0) == 0
+    count = 1 if shared else clouds.shape[0]
+    if ordered is None:
+        ordered = [_in_locality_order(clouds[b].double().numpy()) for b in range(count)]
+    grids = [nn_grid.build_grid(points, radius, spacing).astuple() for points in ordered[:count]]
+    if shared:
+        return ordered[:1] * clouds.shape[0], grids * clouds.shape[0]
+    return ordered, grids
 
 
 def _in_locality_order(points: np.ndarray) -> np.ndarray:

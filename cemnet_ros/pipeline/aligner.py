@@ -1,21 +1,22 @@
-"""Scan-to-scan (sequential) and source-to-target (pair) alignment with CEMNet, for odometry.
+"""Scan-to-map odometry (sequential mode) and source-to-target alignment (pair mode) with CEMNet.
 
-Sequential mode aligns each scan (source) to the previous one (target): the registration maps the current
-scan into the previous one, i.e. it is T_prev_curr, and ``pose_k = pose_{k-1} @ T_prev_curr``.
+Sequential mode registers each scan against a local map of the recent scans (:class:`VoxelMap`, odom frame):
 
-Units: the network and the CEM's epsilon live on the ModelNet unit sphere. Both clouds are centred on the
-target's centroid and divided by ``scale`` (metres per network unit) before registration, and the result is
-mapped back to metres. ``scale <= 0`` ("auto") fixes it on the first target cloud to its robust radius (90th
-percentile of distances to the median point), which makes a 50 m LiDAR scan and a 3 m RGB-D frame both about
-unit size. ``voxel_size = 0`` ("auto") is ``scale / 100``, in the spirit of KISS-ICP's ``max_range / 100``.
+1. **preprocess**: drop non-finite points, crop by range, voxel grid; the CEM's subset and the polish's subset;
+2. **predict**: the constant-velocity pose, and how far to search around it (:class:`AdaptiveSpread`);
+3. **track**: the CEM around the prediction against a sample of the map, then a point-to-plane polish
+   against the map itself;
+4. **judge** the step without ground truth (:class:`HealthMonitor`: fitness, agreement, conditioning, spread);
+5. **recover** when tracking failed, on the first pair, after a stamp gap or on request: the global CEM search
+   (:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation),
+   then the polish, judged the same way plus an ambiguity check between distinct hypotheses;
+6. **commit**: a good step moves the pose, the map, the motion model and the adaptive spread; a failed one is
+   published flagged with the prediction and changes nothing else; a degenerate one keeps the prediction along
+   the unconstrained directions, is flagged, and still extends the map.
 
-``refine_iters`` point-to-plane ICP steps on the voxel clouds polish the CEM's answer (see
-:mod:`cemnet_ros.pipeline.refine`); 0 keeps the paper's pure CEMNet.
-
-A step is flagged (``accepted`` False, ``reason`` set, covariance inflated) when its fitness is below
-``fitness_threshold`` or when the registration disagrees with the motion prediction by more than the jump
-limits; the motion model's prediction is then used instead of the registration. A stamp going backwards
-(e.g. a looping bag) keeps the pose and restarts from the new scan; a repeated stamp is skipped.
+Units: the network and the CEM's epsilon live on the ModelNet unit sphere. Clouds are centred on the target
+sample's centroid and divided by ``scale`` (metres per network unit, auto: the robust radius of the first
+scan). Poses are ``T_odom_sensor``; odom is the first scan's sensor frame.
 """
 from __future__ import annotations
 
@@ -25,25 +26,27 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from cemnet_ros.core import CEMConfig, Registrar, RegistrationConfig
-from cemnet_ros.pipeline.covariance import covariance_from_sigma
+from cemnet_ros.core.geometry import apply_transform, matrix_to_action_np
+from cemnet_ros.core.global_search import GlobalSearchConfig, global_search
+from cemnet_ros.pipeline.adaptive import AdaptiveConfig, AdaptiveSpread
+from cemnet_ros.pipeline.covariance import (Conditioning, covariance_from_hessian, flat_covariance,
+                                            keep_prediction_along)
+from cemnet_ros.pipeline.health import HealthConfig, HealthMonitor, Signals, disagreement
 from cemnet_ros.pipeline.motion import ConstantVelocity
 from cemnet_ros.pipeline.preprocess import (SAMPLING_METHODS, crop_range, finite_points, robust_radius,
                                             subsample, voxel_downsample)
-from cemnet_ros.pipeline.refine import PlaneTarget, point_to_plane_icp
+from cemnet_ros.pipeline import refine
+from cemnet_ros.pipeline.refine import PolishResult, point_to_plane_icp
+from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 PRIORS = ("motion", "network", "identity")
+POLISH_FRACTION = 0.8  # recovery: hypotheses whose CEM fitness is this close to the best one's get polished
 
 
 def odometry_registration() -> RegistrationConfig:
-    """CEM settings for scan-to-scan odometry around a motion prediction.
-
-    The paper's N=1000, T=10, M=3 search the whole space of an object pair from a network guess; around a
-    constant-velocity prediction a short search suffices and keeps a 10 Hz LiDAR stream on a 2-core CPU
-    (measured in docs/node.md). The paper's settings stay one parameter away.
-    """
+    """CEM settings for tracking around a motion prediction: a short search (the recovery is the wide one)."""
     return RegistrationConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0))
 
 
@@ -52,172 +55,294 @@ class ScanRejected(ValueError):
 
 
 @dataclass
+class RecoveryConfig:
+    """When and how widely the global search runs (metres, radians, seconds)."""
+
+    search: GlobalSearchConfig = field(default_factory=GlobalSearchConfig)
+    recovery_radius: float = 10.0  # m: translation disc searched around the prediction
+    recovery_points: int = 1024  # source and map points the global search scores
+    recovery_gap: float = 0.5  # s: a stamp gap longer than this triggers a recovery
+    ambiguity_ratio: float = 0.9  # a distinct hypothesis this close in fitness makes the answer ambiguous
+    polish_distance: float = 3.0  # in frame voxels: the polish's first pairing distance after a recovery
+
+    def __post_init__(self) -> None:
+        if self.recovery_radius < 0 or self.recovery_gap <= 0 or self.polish_distance <= 0:
+            raise ValueError("recovery_radius must be >= 0, recovery_gap and polish_distance > 0")
+        if self.recovery_points < 32:
+            raise ValueError("recovery_points must be >= 32")
+        if not 0.0 < self.ambiguity_ratio <= 1.0:
+            raise ValueError("ambiguity_ratio must lie in (0, 1]")
+
+
+@dataclass
 class AlignerConfig:
-    """Everything the scan pipeline needs; ``registration`` holds the CEM/network settings (n_points, ...)."""
+    """Everything the scan pipeline needs; nested sections by concern."""
 
     registration: RegistrationConfig = field(default_factory=odometry_registration)
-    prior: str = "motion"  # "motion" (constant velocity), "network" (sampling network) or "identity"
-    prior_sigma_rotation: float = 0.05  # rad: CEM spread around the motion prediction
-    prior_sigma_translation: float = 0.5  # metres: CEM spread around the motion prediction
+    adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
+    health: HealthConfig = field(default_factory=HealthConfig)
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
+    prior: str = "motion"  # tracking CEM centre: "motion" (constant velocity), "network" or "identity"
     identity_sigma: float = 1.0  # rad and network units: spread of the "identity" prior (paper: N(0, I))
-    scale: float = 0.0  # metres per network unit; <= 0 = auto (robust radius of the first target cloud)
+    scale: float = 0.0  # metres per network unit; <= 0 = auto (robust radius of the first scan)
     voxel_size: float = 0.0  # metres; 0 = auto (scale / 100); < 0 = no voxel grid
     min_range: float = 0.0  # metres from the sensor; 0 = no lower crop
     max_range: float = 100.0  # metres from the sensor; 0 = no upper crop
-    sampling: str = "random"  # how the voxel centroids are cut to n_points: "random" (seeded) or "farthest"
+    sampling: str = "random"  # how the voxel cloud is cut to n_points: "random" (seeded) or "farthest"
     min_points: int = 50  # fewer points after preprocessing -> ScanRejected
-    fitness_threshold: float = 0.3  # below: flagged, prediction used, covariance inflated
-    covariance_inflation: float = 100.0  # variance factor of a flagged step
-    max_jump_translation: float = 1.0  # network units: registration vs prediction disagreement limit
-    max_jump_rotation: float = 0.5  # rad: same for rotation
-    refine_iters: int = 5  # point-to-plane ICP steps on the voxel clouds after the CEM; 0 = the paper's method
-    refine_points: int = 5000  # source points those steps use at most (a seeded subset of the voxel cloud)
+    map_voxel_factor: float = 3.0  # map voxel = this x the frame voxel
+    map_points_per_voxel: int = 10
+    refine_iters: int = 10  # point-to-plane polish iterations (at most)
+    refine_points: int = 5000  # source points the polish uses at most (a seeded subset of the voxel cloud)
+    inlier_distance: float = 2.0  # in frame voxels: a point with a map point this close counts for the fitness
+    cem_radius: float = 1.5  # in units of scale: the CEM's clouds keep points this close to the sensor
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:
             raise ValueError(f"prior must be one of {PRIORS}, not {self.prior!r}")
         if self.sampling not in SAMPLING_METHODS:
             raise ValueError(f"sampling must be one of {SAMPLING_METHODS}, not {self.sampling!r}")
-        if self.prior_sigma_rotation <= 0 or self.prior_sigma_translation <= 0 or self.identity_sigma <= 0:
-            raise ValueError("prior sigmas must be > 0")
+        if self.identity_sigma <= 0:
+            raise ValueError("identity_sigma must be > 0")
         if self.min_points < 3:
             raise ValueError("min_points must be >= 3")
         if 0 < self.max_range < self.min_range:
             raise ValueError("max_range must be >= min_range (or 0 = no crop)")
-        if self.covariance_inflation < 1.0:
-            raise ValueError("covariance_inflation must be >= 1")
-        if self.refine_iters < 0:
-            raise ValueError("refine_iters must be >= 0")
+        if self.map_voxel_factor <= 0 or self.map_points_per_voxel < 1 or self.inlier_distance <= 0:
+            raise ValueError("map_voxel_factor, map_points_per_voxel and inlier_distance must be > 0")
+        if self.refine_iters < 1:
+            raise ValueError("refine_iters must be >= 1")
         if self.refine_points < 10:
             raise ValueError("refine_points must be >= 10")
+        if self.cem_radius <= 0:
+            raise ValueError("cem_radius must be > 0")
 
 
 @dataclass
 class AlignmentStep:
-    """One processed scan: the accumulated pose odom->sensor and the registration's quality."""
+    """One processed scan: the pose T_odom_sensor and whether the node can vouch for it."""
 
     stamp_ns: int
     pose: np.ndarray  # (4, 4)
     relative: Optional[np.ndarray]  # (4, 4) T_prev_curr, None for the first scan / after a restart
-    covariance: np.ndarray  # (6, 6) ROS order x, y, z, roll, pitch, yaw
+    covariance: np.ndarray  # (6, 6) ROS order x, y, z, roll, pitch, yaw (docs/node.md: frame and meaning)
     fitness: float
     accepted: bool
     latency_s: float
     n_points: int
     reason: str = ""
+    recovered: bool = False  # this step ran the global search
+    recovery_reason: str = ""  # why it ran (first pair, stamp gap, tracking failed, requested)
+    degenerate: bool = False  # a direction was unconstrained: the prediction was kept along it
+    signals: dict = field(default_factory=dict)
 
 
 @dataclass
-class _Cloud:
-    """A preprocessed scan: the voxel cloud (ICP refinement) and its n_points subset (CEMNet), metres."""
+class Frame:
+    """A preprocessed scan (sensor frame, metres): voxel cloud (map), polish subset and CEM subset.
+
+    The CEM sees points near the sensor only: its look-up lattices span the clouds' box, and far points make
+    that box (and its cache misses) large for little information.
+    """
 
     dense: np.ndarray
+    polish: np.ndarray
     sampled: np.ndarray
-    _plane: Optional[PlaneTarget] = None
-
-    def refine_source(self, n: int) -> np.ndarray:
-        """At most ``n`` points of the dense cloud (seeded subset): the source of the ICP polish."""
-        if len(self.dense) <= n:
-            return self.dense
-        return self.dense[np.random.default_rng(0).choice(len(self.dense), n, replace=False)]
+    near: np.ndarray  # the voxel points within the CEM's radius (the global search draws from them)
 
     @property
-    def plane(self) -> PlaneTarget:
-        """The dense cloud as an ICP target (built on first use, kept while this scan is the reference)."""
-        if self._plane is None:
-            self._plane = PlaneTarget(self.dense)
-        return self._plane
+    def length(self) -> float:
+        """RMS range of the polish points: the lever arm that makes rotations comparable to translations."""
+        return float(np.sqrt(np.mean(np.sum(self.polish ** 2, axis=1)))) or 1.0
 
 
-def _angle(transform: np.ndarray) -> float:
-    return float(np.linalg.norm(Rotation.from_matrix(transform[:3, :3]).as_rotvec()))
+@dataclass
+class Estimate:
+    """A registration and its verdict, before it is committed."""
+
+    T_odom_sensor: np.ndarray
+    covariance: np.ndarray
+    signals: Signals
+    failures: list[str]  # why it cannot be vouched for: the prediction is published instead
+    notes: list[str]  # why it is flagged although its pose is used (degenerate, ambiguity resolved)
+    recovered: bool
+
+    @property
+    def degenerate(self) -> bool:
+        return bool(self.notes)
+
+    def published_covariance(self, inflation: float) -> np.ndarray:
+        """The covariance as published: inflated when the step failed."""
+        return self.covariance * inflation if self.failures else self.covariance
 
 
 class ScanAligner:
-    """Stateful scan pipeline: preprocessing, prior, CEMNet registration, gating, pose accumulation."""
+    """Stateful scan pipeline; see the module docstring for the recipe."""
 
     def __init__(self, config: Optional[AlignerConfig] = None, registrar: Optional[Registrar] = None) -> None:
         self.config = config or AlignerConfig()
         reg_prior = "network" if self.config.prior == "network" else "identity"
         self._registrar = registrar or Registrar(dataclasses.replace(self.config.registration, prior=reg_prior))
         self._fixed_scale = self.config.scale if self.config.scale > 0 else None
+        self._pair_targets: dict[int, tuple[np.ndarray, VoxelMap]] = {}
+        refine.compile_kernels()  # map and polish kernels: the first scan must not pay their compilation
         self.reset()
 
     @property
     def scale(self) -> Optional[float]:
-        """Metres per network unit (None until the first target fixed it in auto mode)."""
+        """Metres per network unit (None until the first scan fixed it in auto mode)."""
         return self._scale
 
     @property
     def voxel(self) -> float:
-        """Voxel size (m) of the last preprocessed cloud; 0 = no voxel grid, or nothing preprocessed yet."""
+        """Frame voxel size (m); 0 = no voxel grid, or nothing preprocessed yet."""
         return self._voxel
 
+    @property
+    def local_map(self) -> Optional[VoxelMap]:
+        return self._map
+
     def reset(self) -> None:
-        """Forget the reference scan, the pose and the motion model (the auto scale is measured again)."""
+        """Forget the map, the pose and the motion model (the auto scale is measured again)."""
         self._scale = self._fixed_scale
         self._voxel = 0.0
+        self._map: Optional[VoxelMap] = None
         self._motion = ConstantVelocity()
+        self._spread = AdaptiveSpread(self.config.adaptive)
+        self._health = HealthMonitor(self.config.health)
         self._pose = np.eye(4)
-        self._reference: Optional[_Cloud] = None
         self._last_stamp: Optional[int] = None
-        self._target_raw: Optional[np.ndarray] = None
-        self._target_pre: Optional[_Cloud] = None
+        self._period_ns: Optional[int] = None
+        self._recovery_requested = False
+        self._pair_targets.clear()
 
-    # -- public API ---------------------------------------------------------------------------------------
+    def request_recovery(self) -> None:
+        """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
+        self._recovery_requested = True
+
+    # -- sequential mode ------------------------------------------------------------------------------------
     def process(self, points: np.ndarray, stamp_ns: int) -> AlignmentStep:
-        """Sequential mode: align this scan to the previous one and accumulate the pose."""
-        start = time.perf_counter()
-        stamp_ns = int(stamp_ns)
-        cloud = self._prepare(points)
+        """Register this scan against the local map and accumulate the pose."""
+        start, stamp_ns = time.perf_counter(), int(stamp_ns)
+        frame = self._preprocess(points)
         if self._last_stamp is not None and stamp_ns == self._last_stamp:
-            return self._held(stamp_ns, start, len(cloud.sampled), "duplicate stamp: scan skipped")
-        if self._reference is None or stamp_ns < self._last_stamp:
-            restarted = self._reference is not None
-            back_s = (self._last_stamp - stamp_ns) * 1e-9 if restarted else 0.0
-            self._motion.reset()
-            self._motion.update(self._pose, stamp_ns)
-            self._reference, self._last_stamp = cloud, stamp_ns
-            reason = f"stamp went back {back_s:.3f} s: restarted from this scan, pose kept" if restarted else ""
-            return AlignmentStep(stamp_ns, self._pose.copy(), None, self._floor_cov(), 1.0, not restarted,
-                                 time.perf_counter() - start, len(cloud.sampled), reason)
-        predicted = self._motion.predict_relative(stamp_ns)
-        relative, cov, fitness, accepted, reason = self._register(cloud, self._reference, predicted,
-                                                                  have_prediction=True)
-        self._pose = self._pose @ relative
-        self._motion.update(self._pose, stamp_ns)
-        self._reference, self._last_stamp = cloud, stamp_ns
-        return AlignmentStep(stamp_ns, self._pose.copy(), relative, cov, fitness, accepted,
-                             time.perf_counter() - start, len(cloud.sampled), reason)
+            return self._held(stamp_ns, start, frame, "duplicate stamp: scan skipped")
+        if self._map is None or stamp_ns < self._last_stamp:
+            return self._start_trajectory(frame, stamp_ns, start)
+        dt_ns = stamp_ns - self._last_stamp
+        T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
+        why = self._recovery_reason(dt_ns)
+        estimate = None if why else self._track(frame, self._map, T_predicted, self._dt_ratio(dt_ns))
+        if estimate is not None and estimate.failures:
+            why = "tracking failed (" + "; ".join(estimate.failures) + ")"
+        if why:
+            estimate = self._recover(frame, self._map, T_predicted)
+        return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, why, start)
 
+    def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
+        """The first scan (or one whose stamp went back): the map restarts from it, the pose is kept."""
+        restarted = self._last_stamp is not None
+        reason = (f"stamp went back {(self._last_stamp - stamp_ns) * 1e-9:.3f} s: restarted from this scan, "
+                  "pose kept") if restarted else ""
+        self._map = self._new_map()
+        self._map.update(apply_transform(self._pose, frame.dense), self._pose[:3, 3])
+        self._motion.reset()
+        self._motion.update(self._pose, stamp_ns)
+        self._spread.reset()
+        self._health.reset()
+        self._last_stamp, self._period_ns = stamp_ns, None
+        self._recovery_requested = True  # the first pair has no prediction worth the name
+        return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 1.0, not restarted,
+                             time.perf_counter() - start, len(frame.sampled), reason)
+
+    def _recovery_reason(self, dt_ns: int) -> str:
+        if self._recovery_requested:
+            return "first pair" if not self._motion.has_velocity and self._health.level is None else "requested"
+        if dt_ns * 1e-9 > self.config.recovery.recovery_gap:
+            return f"stamp gap {dt_ns * 1e-9:.3f} s"
+        return ""
+
+    def _dt_ratio(self, dt_ns: int) -> float:
+        return 1.0 if not self._period_ns else dt_ns / self._period_ns
+
+    def _commit(self, frame: Frame, stamp_ns: int, dt_ns: int, T_predicted: np.ndarray, estimate: Estimate,
+                why_recovered: str, start: float) -> AlignmentStep:
+        """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
+        self._recovery_requested = False
+        previous = self._pose
+        reasons = list(estimate.failures)
+        if estimate.failures:
+            pose = T_predicted
+            self._recovery_requested = True  # try the global search again on the next scan
+            reasons.append("motion prediction used")
+        else:
+            pose = estimate.T_odom_sensor
+            reasons += estimate.notes
+            if not estimate.recovered:  # a recovery's guess was no prediction of the motion model
+                self._spread.update(np.linalg.inv(T_predicted) @ pose)
+            self._health.accept(estimate.signals.fitness)
+            self._map.update(apply_transform(pose, frame.dense), pose[:3, 3])
+        self._pose = pose
+        self._motion.update(pose, stamp_ns)
+        self._last_stamp = stamp_ns
+        self._period_ns = dt_ns if self._period_ns is None else int(0.9 * self._period_ns + 0.1 * dt_ns)
+        accepted = not estimate.failures and not estimate.degenerate
+        covariance = estimate.published_covariance(self.config.health.covariance_inflation)
+        return AlignmentStep(stamp_ns, pose.copy(), np.linalg.inv(previous) @ pose, covariance,
+                             estimate.signals.fitness, accepted, time.perf_counter() - start, len(frame.sampled),
+                             "; ".join(reasons) if not accepted else "", estimate.recovered, why_recovered,
+                             estimate.degenerate, estimate.signals.as_dict())
+
+    # -- pair mode ------------------------------------------------------------------------------------------
     def align_pair(self, source: np.ndarray, target: np.ndarray, stamp_ns: int) -> AlignmentStep:
-        """Pair mode: the pose of ``source`` in the frame of ``target`` (a reused target is preprocessed once)."""
-        start = time.perf_counter()
-        stamp_ns = int(stamp_ns)
-        if target is not self._target_raw:
-            self._target_pre, self._target_raw = self._prepare(target), target
-        cloud = self._prepare(source)
+        """Pair mode: the pose of ``source`` in the frame of ``target`` (a reused target is prepared once)."""
+        start, stamp_ns = time.perf_counter(), int(stamp_ns)
+        target_map = self._pair_target(target)
+        frame = self._preprocess(source)
         if self._last_stamp is not None and stamp_ns < self._last_stamp:
             self._motion.reset()
-        have_prediction = self._motion.last_pose is not None
-        predicted = self._motion.predict(stamp_ns)
-        pose, cov, fitness, accepted, reason = self._register(cloud, self._target_pre, predicted,
-                                                              have_prediction=have_prediction)
+        why = "no pose yet" if self._motion.last_pose is None else ""
+        if why:
+            estimate = self._recover(frame, target_map, np.eye(4))
+        else:
+            estimate = self._track(frame, target_map, self._motion.predict(stamp_ns), 1.0)
+            if estimate.failures:
+                why = "tracking failed (" + "; ".join(estimate.failures) + ")"
+                estimate = self._recover(frame, target_map, self._motion.predict(stamp_ns))
+        accepted = not estimate.failures and not estimate.degenerate
+        pose = estimate.T_odom_sensor
         previous = self._motion.last_pose
+        if not estimate.failures:
+            self._motion.update(pose, stamp_ns)
+        self._last_stamp = stamp_ns
         relative = None if previous is None else np.linalg.inv(previous) @ pose
-        self._motion.update(pose, stamp_ns)
-        self._pose, self._last_stamp = pose, stamp_ns
-        return AlignmentStep(stamp_ns, pose.copy(), relative, cov, fitness, accepted,
-                             time.perf_counter() - start, len(cloud.sampled), reason)
+        reason = "; ".join(estimate.failures + estimate.notes)
+        covariance = estimate.published_covariance(self.config.health.covariance_inflation)
+        return AlignmentStep(stamp_ns, pose.copy(), relative, covariance, estimate.signals.fitness,
+                             accepted, time.perf_counter() - start, len(frame.sampled), reason, estimate.recovered,
+                             why, estimate.degenerate,
+                             estimate.signals.as_dict())
 
-    # -- internals -----------------------------------------------------------------------------------------
-    def _prepare(self, points: np.ndarray) -> _Cloud:
-        """Preprocess to metres; the first cloud seen fixes the auto scale. Raises ScanRejected."""
+    def _pair_target(self, target: np.ndarray) -> VoxelMap:
+        """The target's map, built once per target array (a latched map is prepared once)."""
+        cached = self._pair_targets.get(id(target))
+        if cached is not None and cached[0] is target:
+            return cached[1]
+        frame = self._preprocess(target)
+        target_map = self._new_map()
+        target_map.update(frame.dense, np.zeros(3))
+        self._pair_targets.clear()
+        self._pair_targets[id(target)] = (target, target_map)
+        return target_map
+
+    # -- the steps ------------------------------------------------------------------------------------------
+    def _preprocess(self, points: np.ndarray) -> Frame:
+        """Metres, cropped and voxelised; the first scan fixes the auto scale. Raises ScanRejected."""
         cfg = self.config
         cropped = crop_range(finite_points(points), cfg.min_range, cfg.max_range)
+        if len(cropped) < cfg.min_points:
+            raise ScanRejected(f"too few points: {len(cropped)} after range crop, need {cfg.min_points}")
         if self._scale is None:
-            if len(cropped) < cfg.min_points:
-                raise ScanRejected(f"too few points: {len(cropped)} after range crop, need {cfg.min_points}")
             radius = robust_radius(cropped)
             if not radius > 0:
                 raise ScanRejected("degenerate cloud: all points coincide, cannot measure its scale")
@@ -226,60 +351,150 @@ class ScanAligner:
         dense = voxel_downsample(cropped, self._voxel)
         if len(dense) < cfg.min_points:
             raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {cfg.min_points}")
-        sampled = subsample(dense, cfg.registration.n_points, cfg.sampling, cfg.registration.seed or 0)
-        return _Cloud(dense, sampled)
+        seed = cfg.registration.seed or 0
+        near = dense[np.einsum("ij,ij->i", dense, dense) <= (cfg.cem_radius * self._scale) ** 2]
+        near = near if len(near) >= cfg.min_points else dense
+        return Frame(dense, subsample(dense, cfg.refine_points, "random", seed),
+                     subsample(near, cfg.registration.n_points, cfg.sampling, seed), near)
 
-    def _prior_sigma(self) -> np.ndarray:
-        cfg = self.config
-        if cfg.prior == "identity":
-            return np.full(6, cfg.identity_sigma)
-        return np.array([cfg.prior_sigma_rotation] * 3 + [cfg.prior_sigma_translation / self._scale] * 3)
+    def _new_map(self) -> VoxelMap:
+        voxel = self._voxel if self._voxel > 0 else self._scale / 100.0
+        max_distance = self.config.max_range if self.config.max_range > 0 else 10.0 * self._scale
+        return VoxelMap(voxel * self.config.map_voxel_factor, self.config.map_points_per_voxel, max_distance)
 
-    def _register(self, source: _Cloud, target: _Cloud, predicted: np.ndarray, have_prediction: bool):
-        """Register in network units; gate on fitness and jumps. Returns (T, covariance, fitness, ok, reason)."""
-        cfg, scale = self.config, self._scale
-        centre = target.sampled.mean(axis=0)
+    def _units(self, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(to_units, from_units) 4x4 maps between metres and network units centred on ``centre``."""
         to_units = np.eye(4)
-        to_units[:3, :3] /= scale
-        to_units[:3, 3] = -centre / scale
-        from_units = np.linalg.inv(to_units)
-        src_u = (source.sampled - centre) / scale
-        tgt_u = (target.sampled - centre) / scale
-        prior_sigma = self._prior_sigma()
-        if cfg.prior == "network":
-            res = self._registrar.register(src_u, tgt_u)
+        to_units[:3, :3] /= self._scale
+        to_units[:3, 3] = -centre / self._scale
+        return to_units, np.linalg.inv(to_units)
+
+    def _map_sample(self, target_map: VoxelMap, T_guess: np.ndarray, n: int, margin: float = 0.0) -> np.ndarray:
+        """``n`` map points within the CEM's radius (+ ``margin`` m) of the guessed sensor position."""
+        radius = self.config.cem_radius * self._scale + margin
+        return target_map.sample(n, T_guess[:3, 3], radius, seed=self.config.registration.seed or 0)
+
+    def _track(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, dt_ratio: float) -> Estimate:
+        """The CEM around the prediction (adaptive spread) against a map sample, then the polish.
+
+        When the two disagree the CEM gets a second opinion around the polish's answer: a prediction that was
+        far off (a stop, a swing) leaves the first search looking in the wrong place, a polish that slid away
+        finds no consensus there.
+        """
+        cfg = self.config
+        target = self._map_sample(target_map, T_predicted, cfg.registration.n_points)
+        to_units, from_units = self._units(target.mean(axis=0))
+        clouds = apply_transform(to_units, frame.sampled), apply_transform(to_units, target)
+        rotation, translation = self._spread.spread(dt_ratio)
+        sigma = (np.full(6, cfg.identity_sigma) if cfg.prior == "identity"
+                 else np.r_[np.full(3, rotation), np.full(3, translation / self._scale)])
+        centre = T_predicted if cfg.prior != "identity" else self._motion.last_pose
+        T_cem, spread_m = self._cem(clouds, to_units, from_units, None if cfg.prior == "network" else centre, sigma)
+        voxel = self._polish_voxel()
+        max_distance = max(2.0 * voxel, min(translation, cfg.recovery.polish_distance * voxel))
+        polish = point_to_plane_icp(target_map, frame.polish, T_cem, max_distance, cfg.refine_iters)
+        metres, radians = disagreement(T_cem, polish.T_target_source)
+        if metres > cfg.health.max_disagreement_translation or radians > cfg.health.max_disagreement_rotation:
+            T_cem, spread_m = self._cem(clouds, to_units, from_units, polish.T_target_source, sigma)
+        return self._judge(frame, target_map, T_predicted, T_cem, polish, spread_m, recovered=False,
+                           prediction_std=translation)
+
+    def _cem(self, clouds: tuple[np.ndarray, np.ndarray], to_units: np.ndarray, from_units: np.ndarray,
+             T_centre: Optional[np.ndarray], sigma: np.ndarray) -> tuple[np.ndarray, float]:
+        """The CEM in units around ``T_centre`` (None: the network's prior); (T_odom_sensor, final spread m)."""
+        if T_centre is None:
+            result = self._registrar.register(*clouds)
         else:
-            prior = predicted if cfg.prior == "motion" else np.eye(4)
-            res = self._registrar.register(src_u, tgt_u, prior_pose=to_units @ prior @ from_units,
-                                           prior_sigma=prior_sigma)
-        transform = from_units @ np.asarray(res.transform, dtype=np.float64) @ to_units
-        transform[3] = (0.0, 0.0, 0.0, 1.0)
-        if cfg.refine_iters > 0:
-            start = cfg.registration.cem.epsilon * scale / 2.0
-            end = 2.0 * self._voxel if self._voxel > 0 else start / 8.0
-            transform = point_to_plane_icp(source.refine_source(cfg.refine_points), target.plane, transform, start,
-                                           end, cfg.refine_iters)
-        fitness = float(res.fitness)
-        reason = ""
-        if fitness < cfg.fitness_threshold:
-            reason = f"low fitness {fitness:.3f} < {cfg.fitness_threshold:.3f}"
-        elif have_prediction:
-            error = np.linalg.inv(predicted) @ transform
-            jump_m, jump_rad = float(np.linalg.norm(error[:3, 3])), _angle(error)
-            if jump_m > cfg.max_jump_translation * scale or jump_rad > cfg.max_jump_rotation:
-                reason = (f"jump: registration differs from the motion prediction by {jump_m:.3f} m, "
-                          f"{np.degrees(jump_rad):.1f} deg")
-        if not reason:
-            return transform, covariance_from_sigma(res.sigma, scale), fitness, True, ""
-        sigma = np.maximum(np.abs(np.asarray(res.sigma, dtype=np.float64)), prior_sigma)
-        cov = covariance_from_sigma(sigma, scale, inflate=cfg.covariance_inflation)
-        if have_prediction:
-            return predicted, cov, fitness, False, reason + "; motion prediction used"
-        return transform, cov, fitness, False, reason
+            result = self._registrar.register(*clouds, prior_pose=to_units @ T_centre @ from_units, prior_sigma=sigma)
+        T_cem = from_units @ np.asarray(result.transform, dtype=np.float64) @ to_units
+        T_cem[3] = (0.0, 0.0, 0.0, 1.0)
+        return T_cem, float(np.max(np.abs(result.sigma[3:]))) * self._scale
 
-    def _floor_cov(self) -> np.ndarray:
-        return covariance_from_sigma(np.zeros(6), self._scale)
+    def _recover(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray) -> Estimate:
+        """The global CEM search around ``T_guess``, each distinct hypothesis polished; the best one judged."""
+        cfg, rec = self.config, self.config.recovery
+        target = self._map_sample(target_map, T_guess, rec.recovery_points, margin=rec.recovery_radius)
+        to_units, from_units = self._units(target.mean(axis=0))
+        source = subsample(frame.near, rec.recovery_points, "random", cfg.registration.seed or 0)
+        centre = matrix_to_action_np(to_units @ T_guess @ from_units)
+        hypotheses = global_search(apply_transform(to_units, source), apply_transform(to_units, target), centre,
+                                   rec.recovery_radius / self._scale, rec.search, seed=cfg.registration.seed or 0)
+        wide = rec.polish_distance * self._polish_voxel()
+        estimates = []
+        for hypothesis in hypotheses:
+            if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
+                break  # far behind the best: not worth a polish, nor a rival
+            T_cem = from_units @ hypothesis.T_target_source @ to_units
+            T_cem[3] = (0.0, 0.0, 0.0, 1.0)
+            coarse = point_to_plane_icp(target_map, frame.polish, T_cem, wide, cfg.refine_iters)
+            polish = point_to_plane_icp(target_map, frame.polish, coarse.T_target_source,
+                                        2.0 * self._polish_voxel(), cfg.refine_iters)
+            estimates.append(self._judge(frame, target_map, T_guess, T_cem, polish, 0.0, recovered=True,
+                                         prediction_std=rec.recovery_radius, agreement_scale=rec.polish_distance))
+        estimates.sort(key=lambda e: -e.signals.fitness)
+        return self._resolve_ambiguity(estimates, T_guess)
 
-    def _held(self, stamp_ns: int, start: float, n_points: int, reason: str) -> AlignmentStep:
-        return AlignmentStep(stamp_ns, self._pose.copy(), None, self._floor_cov(), 0.0, False,
-                             time.perf_counter() - start, n_points, reason)
+    def _resolve_ambiguity(self, estimates: list[Estimate], T_guess: np.ndarray) -> Estimate:
+        """The fittest hypothesis, or among distinct near-ties the one next to the guess (a symmetric scene).
+
+        A tie resolved by a guess within the tracking spread is flagged with a note; ties all far from the
+        guess are a failure ("ambiguous").
+        """
+        best = estimates[0]
+        ties = [best]
+        for estimate in estimates[1:]:
+            if estimate.signals.fitness >= self.config.recovery.ambiguity_ratio * best.signals.fitness and all(
+                    _far(estimate.T_odom_sensor, kept.T_odom_sensor) for kept in ties):
+                ties.append(estimate)
+        if len(ties) == 1:
+            return best
+        rotation, translation = self._spread.spread()
+        nearest = min(ties, key=lambda e: disagreement(T_guess, e.T_odom_sensor)[0])
+        metres, radians = disagreement(T_guess, nearest.T_odom_sensor)
+        summary = (f"{len(ties)} distinct hypotheses within {self.config.recovery.ambiguity_ratio:.2f} of the best "
+                   "fitness")
+        if metres <= 3.0 * translation and radians <= 3.0 * rotation:
+            nearest.notes.append(f"symmetric scene: {summary}, the one next to the motion prediction kept")
+            return nearest
+        best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")
+        return best
+
+    def _polish_voxel(self) -> float:
+        return self._voxel if self._voxel > 0 else self._scale / 100.0
+
+    def _inlier_distance(self) -> float:
+        return self.config.inlier_distance * self._polish_voxel()
+
+    def _judge(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, T_cem: np.ndarray,
+               polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float,
+               agreement_scale: float = 1.0) -> Estimate:
+        """Signals of one registration, its failures, degeneracy and covariance."""
+        cfg = self.config.health
+        T_final = polish.T_target_source
+        conditioning = Conditioning.of(polish.hessian, frame.length)
+        fitness = target_map.inlier_fraction(frame.polish, T_final, self._inlier_distance())
+        metres, radians = disagreement(T_cem, T_final)
+        signals = Signals(fitness, metres / agreement_scale, radians / agreement_scale, conditioning.ratio, spread_m)
+        failures = self._health.failures(signals, use_spread=not recovered)
+        if polish.n_pairs < 10:
+            failures.append(f"only {polish.n_pairs} point-to-plane pairs")
+        notes = []
+        if self._health.degenerate(signals):
+            notes.append(f"degenerate (conditioning {conditioning.ratio:.4f}): the motion prediction kept along "
+                         "the unconstrained direction")
+            if not failures:
+                T_final = keep_prediction_along(conditioning.degenerate_basis(cfg.min_conditioning),
+                                                conditioning.length, T_predicted, T_final)
+        covariance = covariance_from_hessian(conditioning, polish.residual_variance, prediction_std ** 2,
+                                             cfg.min_conditioning)
+        return Estimate(T_final, covariance, signals, failures, notes, recovered)
+
+    def _held(self, stamp_ns: int, start: float, frame: Frame, reason: str) -> AlignmentStep:
+        return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 0.0, False,
+                             time.perf_counter() - start, len(frame.sampled), reason)
+
+
+def _far(T_a: np.ndarray, T_b: np.ndarray) -> bool:
+    """Two answers that are distinct hypotheses, not one basin: more than 1 m or 5 deg apart."""
+    metres, radians = disagreement(T_a, T_b)
+    return metres > 1.0 or radians > np.radians(5.0)

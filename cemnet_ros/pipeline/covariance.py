@@ -1,29 +1,77 @@
-"""6x6 pose covariance for nav_msgs/Odometry from the CEM's final sampling spread.
+"""Pose covariance of a registration from the point-to-plane polish's Hessian, and its degenerate directions.
 
-The CEM ends with a Gaussian N(mu, diag(sigma^2)) over actions ``[euler_z, euler_y, euler_x, tx, ty, tz]``
-in network units; its spread is a direct, per-scan measure of how well the registration is constrained. ROS
-orders covariance as ``x, y, z, roll, pitch, yaw``; for the small per-scan rotations the Euler angles z, y, x
-are approximately yaw, pitch, roll (exact at zero rotation).
+The polish minimises sum w_i r_i^2 over the perturbation [w, v]: R <- exp([w]x) R, t <- t + v (rotation about
+the sensor's position, axes of the map frame). At the optimum the covariance of [w, v] is sigma^2 H^-1, with
+sigma^2 the residual variance. Along a direction the scene does not constrain (a corridor's axis) the Hessian's
+eigenvalue is near zero: the pipeline keeps the motion prediction there and the covariance reports the
+prediction's uncertainty instead, so it grows along the corridor. ROS orders covariance x, y, z, roll, pitch,
+yaw: [v, w] here (rotation-vector components about the map axes, which are roll, pitch, yaw for small angles).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+from cemnet_ros.core.geometry import so3_exp, so3_log
 
 MIN_STD_TRANSLATION = 1e-3  # metres: the floor keeps the matrix positive definite for SLAM back ends
 MIN_STD_ROTATION = 1e-3  # radians
+ROS_ORDER = [3, 4, 5, 0, 1, 2]  # [w, v] -> x, y, z, roll, pitch, yaw
 
 
-def covariance_from_sigma(sigma: np.ndarray, scale: float, *, inflate: float = 1.0,
-                          min_std_translation: float = MIN_STD_TRANSLATION,
-                          min_std_rotation: float = MIN_STD_ROTATION) -> np.ndarray:
-    """Diagonal ROS covariance from CEM sigma ``[z, y, x, tx, ty, tz]`` (rad, network units).
+@dataclass
+class Conditioning:
+    """Eigen-decomposition of the Hessian with rotations scaled to metres by ``length``."""
 
-    ``scale`` is metres per network unit; ``inflate`` multiplies the variances (e.g. for a low-fitness step).
-    """
-    sigma = np.abs(np.asarray(sigma, dtype=np.float64).reshape(6))
-    if not np.all(np.isfinite(sigma)):
-        raise ValueError(f"sigma must be finite, got {sigma}")
-    translation_std = np.maximum(sigma[3:] * float(scale), min_std_translation)
-    roll_pitch_yaw_std = np.maximum(sigma[[2, 1, 0]], min_std_rotation)
-    variances = np.concatenate([translation_std, roll_pitch_yaw_std]) ** 2 * float(inflate)
-    return np.diag(variances)
+    eigenvalues: np.ndarray  # (6,) ascending
+    eigenvectors: np.ndarray  # (6, 6) columns, in normalised coordinates [w * length, v]
+    length: float
+
+    @classmethod
+    def of(cls, hessian: np.ndarray, length: float) -> "Conditioning":
+        scale = np.r_[np.full(3, 1.0 / length), np.ones(3)]
+        values, vectors = np.linalg.eigh(hessian * np.outer(scale, scale))
+        return cls(np.maximum(values, 0.0), vectors, float(length))
+
+    @property
+    def ratio(self) -> float:
+        """lambda_min / lambda_max (0 = a free direction, 1 = constrained alike in every direction)."""
+        return float(self.eigenvalues[0] / self.eigenvalues[-1]) if self.eigenvalues[-1] > 0 else 0.0
+
+    def degenerate_basis(self, min_ratio: float) -> np.ndarray:
+        """(6, k) normalised directions whose eigenvalue is below ``min_ratio`` times the largest."""
+        return self.eigenvectors[:, self.eigenvalues < min_ratio * self.eigenvalues[-1]]
+
+
+def keep_prediction_along(basis: np.ndarray, length: float, T_predicted: np.ndarray, T_registered: np.ndarray
+                          ) -> np.ndarray:
+    """T_registered with its difference to T_predicted removed along the normalised ``basis`` directions."""
+    delta = np.r_[so3_log(T_registered[:3, :3] @ T_predicted[:3, :3].T) * length,
+                  T_registered[:3, 3] - T_predicted[:3, 3]]
+    delta -= basis @ (basis.T @ delta)
+    out = np.eye(4)
+    out[:3, :3] = so3_exp(delta[:3] / length) @ T_predicted[:3, :3]
+    out[:3, 3] = T_predicted[:3, 3] + delta[3:]
+    return out
+
+
+def covariance_from_hessian(conditioning: Conditioning, residual_variance: float, degenerate_variance: float,
+                            min_ratio: float, *, inflate: float = 1.0) -> np.ndarray:
+    """6x6 ROS covariance: sigma^2 H^-1, the free directions given ``degenerate_variance`` (m^2, normalised)."""
+    values = conditioning.eigenvalues
+    floor = max(values[-1], 1e-12) * min_ratio
+    variances = np.where(values >= floor, residual_variance / np.maximum(values, 1e-12), degenerate_variance)
+    vectors = conditioning.eigenvectors
+    normalised = (vectors * variances) @ vectors.T
+    scale = np.r_[np.full(3, 1.0 / conditioning.length), np.ones(3)]
+    cov = normalised * np.outer(scale, scale)  # back to [w (rad), v (m)]
+    cov = cov[np.ix_(ROS_ORDER, ROS_ORDER)] * float(inflate)
+    floor_std = np.r_[np.full(3, MIN_STD_TRANSLATION), np.full(3, MIN_STD_ROTATION)]
+    return cov + np.diag(floor_std ** 2)
+
+
+def flat_covariance(std_translation: float, std_rotation: float, *, inflate: float = 1.0) -> np.ndarray:
+    """Diagonal ROS covariance (e.g. a step without a polish, or the first scan)."""
+    std = np.r_[np.full(3, max(std_translation, MIN_STD_TRANSLATION)), np.full(3, max(std_rotation, MIN_STD_ROTATION))]
+    return np.diag(std ** 2) * float(inflate)

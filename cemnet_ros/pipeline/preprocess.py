@@ -5,46 +5,145 @@ network and the CEM's epsilon live on the ModelNet unit sphere).
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 
+GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: multiply, keep the top bits
 SAMPLING_METHODS = ("random", "farthest")
 
 
 def finite_points(points: np.ndarray) -> np.ndarray:
     """(n, 3) float64 rows whose three coordinates are all finite."""
-    pts = np.asarray(points, dtype=np.float64)
+    pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
-    return pts[np.isfinite(pts).all(axis=1)]
+    if pts.dtype not in (np.float32, np.float64):
+        pts = pts.astype(np.float64)
+    return _finite_rows(pts)
 
 
 def crop_range(points: np.ndarray, min_range: float = 0.0, max_range: float = 0.0) -> np.ndarray:
     """Keep points whose distance to the sensor origin lies in [min_range, max_range]; 0 disables a bound."""
     if min_range <= 0.0 and max_range <= 0.0:
         return points
-    dist = np.linalg.norm(points, axis=1)
-    keep = np.ones(len(points), dtype=bool)
-    if min_range > 0.0:
-        keep &= dist >= min_range
-    if max_range > 0.0:
-        keep &= dist <= max_range
-    return points[keep]
+    return _rows_in_range(np.ascontiguousarray(points), float(min_range) if min_range > 0.0 else 0.0,
+                          float(max_range) if max_range > 0.0 else np.inf)
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
-    """One point per occupied voxel: the centroid of the points inside it (voxel_size <= 0 = unchanged)."""
+    """One point per occupied voxel: the centroid of the points inside it (voxel_size <= 0 = unchanged).
+
+    Voxels in order of their first point (a scan's order keeps neighbouring voxels close in memory).
+    """
     if voxel_size <= 0.0 or len(points) == 0:
         return points
-    cells = np.floor(points / voxel_size).astype(np.int64)
-    cells -= cells.min(0)
-    dims = cells.max(0) + 1
-    keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]  # one int64 per voxel: a fast sort
-    order = np.argsort(keys)
-    sorted_keys = keys[order]
-    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-    sums = np.add.reduceat(points[order], starts, axis=0)
-    counts = np.diff(np.r_[starts, len(points)])
-    return sums / counts[:, None]
+    return _voxel_centroids(np.ascontiguousarray(points, dtype=np.float64), float(voxel_size))
+
+
+@numba.njit
+def _finite_rows(points):
+    """The rows of ``points`` whose coordinates are all finite, as float64 (two passes: count, copy)."""
+    n = 0
+    for i in range(points.shape[0]):
+        if np.isfinite(points[i, 0]) and np.isfinite(points[i, 1]) and np.isfinite(points[i, 2]):
+            n += 1
+    out = np.empty((n, 3))
+    k = 0
+    for i in range(points.shape[0]):
+        if np.isfinite(points[i, 0]) and np.isfinite(points[i, 1]) and np.isfinite(points[i, 2]):
+            out[k, 0], out[k, 1], out[k, 2] = points[i, 0], points[i, 1], points[i, 2]
+            k += 1
+    return out
+
+
+@numba.njit
+def _rows_in_range(points, min_range, max_range):
+    """The rows of ``points`` whose norm lies in [min_range, max_range] (norm summed as numpy does)."""
+    keep = np.empty(points.shape[0], dtype=np.bool_)
+    n = 0
+    for i in range(points.shape[0]):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        dist = np.sqrt(x * x + y * y + z * z)
+        keep[i] = min_range <= dist <= max_range
+        n += keep[i]
+    out = np.empty((n, 3), dtype=points.dtype)
+    k = 0
+    for i in range(points.shape[0]):
+        if keep[i]:
+            out[k, 0], out[k, 1], out[k, 2] = points[i, 0], points[i, 1], points[i, 2]
+            k += 1
+    return out
+
+
+@numba.njit
+def _hash_slot(table, key, shift):
+    """The row of ``table`` (key, value) holding ``key``, or the free row where it belongs (linear probing)."""
+    mask = table.shape[0] - 1
+    j = np.int64((np.uint64(key) * GOLDEN) >> shift)
+    while table[j, 0] != key and table[j, 0] != -1:
+        j = (j + 1) & mask
+    return j
+
+
+@numba.njit
+def _doubled(table, bits):
+    """``table`` rehashed into twice as many rows (2^(bits + 1))."""
+    bigger = np.full((2 * table.shape[0], 2), -1, dtype=np.int64)
+    shift = np.uint64(64 - bits - 1)
+    for i in range(table.shape[0]):
+        if table[i, 0] != -1:
+            j = _hash_slot(bigger, table[i, 0], shift)
+            bigger[j, 0], bigger[j, 1] = table[i, 0], table[i, 1]
+    return bigger
+
+
+@numba.njit
+def _voxel_centroids(points, voxel_size):
+    """Centroid per voxel floor(p / voxel_size), in one pass through a hash table of int64 voxel keys.
+
+    Keys count cells from the lowest occupied one (a mixed-radix number), so no coordinate range is too large.
+    The table starts small (scans have several points per voxel) and doubles when half full; consecutive
+    points of a scan mostly share a voxel, so the previous point's voxel is tried first.
+    """
+    n = points.shape[0]
+    lo, hi = np.empty(3, dtype=np.int64), np.empty(3, dtype=np.int64)
+    for k in range(3):  # floor(x / voxel_size) is monotone in x: the extreme cells are those of the extremes
+        lo[k] = np.int64(np.floor(points[:, k].min() / voxel_size))
+        hi[k] = np.int64(np.floor(points[:, k].max() / voxel_size))
+    dim_y, dim_z = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
+    bits = 10
+    while (1 << bits) < n // 2:
+        bits += 1
+    table = np.full((1 << bits, 2), -1, dtype=np.int64)  # (key, voxel) rows
+    sums = np.empty((n, 3))
+    counts = np.empty(n, dtype=np.int64)
+    n_voxels = 0
+    last_key, v = -1, -1
+    for i in range(n):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        key = ((np.int64(np.floor(x / voxel_size)) - lo[0]) * dim_y
+               + np.int64(np.floor(y / voxel_size)) - lo[1]) * dim_z + np.int64(np.floor(z / voxel_size)) - lo[2]
+        if key != last_key:
+            last_key = key
+            j = _hash_slot(table, key, np.uint64(64 - bits))
+            if table[j, 0] == -1:
+                table[j, 0], table[j, 1] = key, n_voxels
+                sums[n_voxels, 0] = sums[n_voxels, 1] = sums[n_voxels, 2] = 0.0
+                counts[n_voxels] = 0
+                n_voxels += 1
+            v = table[j, 1]
+            if 2 * n_voxels > table.shape[0]:
+                table = _doubled(table, bits)
+                bits += 1
+        sums[v, 0] += x
+        sums[v, 1] += y
+        sums[v, 2] += z
+        counts[v] += 1
+    out = np.empty((n_voxels, 3))
+    for v in range(n_voxels):
+        for k in range(3):
+            out[v, k] = sums[v, k] / counts[v]
+    return out
 
 
 def farthest_point_indices(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
@@ -79,3 +178,13 @@ def robust_radius(points: np.ndarray, percentile: float = 90.0, max_samples: int
     centred = points - np.median(points, axis=0)
     return float(np.percentile(np.linalg.norm(centred, axis=1), percentile))
 
+
+def compile_kernels() -> None:
+    """Compile the preprocessing kernels now, so that the first scan is not slow.
+
+    For the clouds the pipeline sees: float64 (a decoded PointCloud2) and the float32 x, y, z columns of a KITTI
+    x, y, z, intensity array; other dtypes and layouts compile on first use.
+    """
+    with_intensity = np.random.default_rng(0).random((16, 4)).astype(np.float32)
+    finite_points(with_intensity[:, :3])
+    voxel_downsample(crop_range(finite_points(with_intensity[:, :3].astype(np.float64)), 0.1, 1.0), 0.5)

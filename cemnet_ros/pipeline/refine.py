@@ -1,111 +1,149 @@
-"""Optional local refinement of a CEMNet result: point-to-plane ICP on the voxelised clouds, in metres.
+"""Point-to-plane ICP of a scan against the local map (:class:`~cemnet_ros.pipeline.voxel_map.VoxelMap`), metres.
 
-CEMNet sees ``n_points`` (768) random points per cloud, which bounds its accuracy to a fraction of the point
-spacing; a few point-to-plane ICP steps on the denser voxel clouds, started from the CEM's answer, remove
-that sampling error (``refine_iters = 0`` turns it off and keeps the paper's method).
+Gauss-Newton on r_i = n_q . (R p_i + t - q), q the nearest map point within ``max_distance`` and n_q its
+normal, each pair weighted by q's planarity times a Geman-McClure weight of its residual (a q without a
+normal, planarity 0, gives no pair). The motion is updated as R <- exp([w]x) R, t <- t + v: a rotation about
+the SOURCE origin (the sensor) in target axes, so the Jacobian row is [(R p_i) x n_q, n_q] and the returned
+Hessian J^T W J (order [w, v]) is the information of exactly that parameterisation, which the covariance and
+degeneracy analysis downstream rely on.
+
+The per-point work (transform, nearest map point, residual, weighted J^T J and J^T r) is one numba kernel over
+chunks of the source with per-chunk partial sums; only the 6x6 solve runs in numpy.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Optional
+
 import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
-MIN_PAIRS = 10
+from cemnet_ros.pipeline.voxel_map import FAST, VoxelMap, nearest_slot
+from cemnet_ros.pipeline.voxel_map import compile_kernels as compile_map_kernels
 
-
-def estimate_normals(points: np.ndarray, tree: cKDTree, k: int = 10) -> np.ndarray:
-    """Unit normals from the smallest principal axis of each point's k nearest neighbours."""
-    k = min(k, len(points))
-    _, idx = tree.query(points, k=k)
-    return _smallest_axes(points, idx)
-
-
-@numba.njit(cache=True, fastmath=True, parallel=True)
-def _smallest_axes(points, idx):
-    """Per point: the eigenvector of the smallest eigenvalue of its neighbourhood covariance (closed form)."""
-    out = np.empty((idx.shape[0], 3))
-    k = idx.shape[1]
-    for i in numba.prange(idx.shape[0]):
-        mx = my = mz = 0.0
-        for j in idx[i]:
-            mx += points[j, 0]
-            my += points[j, 1]
-            mz += points[j, 2]
-        mx, my, mz = mx / k, my / k, mz / k
-        a00 = a01 = a02 = a11 = a12 = a22 = 0.0
-        for j in idx[i]:
-            dx, dy, dz = points[j, 0] - mx, points[j, 1] - my, points[j, 2] - mz
-            a00 += dx * dx
-            a01 += dx * dy
-            a02 += dx * dz
-            a11 += dy * dy
-            a12 += dy * dz
-            a22 += dz * dz
-        # Smallest eigenvalue of the symmetric 3x3 (trigonometric solution), then its eigenvector as the
-        # largest cross product of two rows of (A - lambda I).
-        q = (a00 + a11 + a22) / 3.0
-        p1 = a01 * a01 + a02 * a02 + a12 * a12
-        p = np.sqrt(((a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1) / 6.0)
-        out[i, 0], out[i, 1], out[i, 2] = 0.0, 0.0, 1.0
-        if p < 1e-150:
-            continue
-        b00, b11, b22 = (a00 - q) / p, (a11 - q) / p, (a22 - q) / p
-        b01, b02, b12 = a01 / p, a02 / p, a12 / p
-        det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
-        r = min(max(det / 2.0, -1.0), 1.0)
-        lam = q + 2.0 * p * np.cos(np.arccos(r) / 3.0 + 2.0 * np.pi / 3.0)
-        c00, c11, c22 = a00 - lam, a11 - lam, a22 - lam
-        # rows: (c00, a01, a02), (a01, c11, a12), (a02, a12, c22)
-        x0, x1, x2 = a01 * a12 - a02 * c11, a02 * a01 - c00 * a12, c00 * c11 - a01 * a01
-        y0, y1, y2 = a01 * c22 - a02 * a12, a02 * a02 - c00 * c22, c00 * a12 - a01 * a02
-        z0, z1, z2 = c11 * c22 - a12 * a12, a12 * a02 - a01 * c22, a01 * a12 - c11 * a02
-        nx, ny, nz = x0 * x0 + x1 * x1 + x2 * x2, y0 * y0 + y1 * y1 + y2 * y2, z0 * z0 + z1 * z1 + z2 * z2
-        if nx >= ny and nx >= nz and nx > 0:
-            s = 1.0 / np.sqrt(nx)
-            out[i, 0], out[i, 1], out[i, 2] = x0 * s, x1 * s, x2 * s
-        elif ny >= nz and ny > 0:
-            s = 1.0 / np.sqrt(ny)
-            out[i, 0], out[i, 1], out[i, 2] = y0 * s, y1 * s, y2 * s
-        elif nz > 0:
-            s = 1.0 / np.sqrt(nz)
-            out[i, 0], out[i, 1], out[i, 2] = z0 * s, z1 * s, z2 * s
-    return out
+CHUNKS_PER_THREAD = 4  # partial sums per thread, handed out dynamically: balances uneven chunks and threads
+N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs
+UPPER = np.triu_indices(6)  # the kernel's order of the J^T W J entries
+DAMPING = 1e-12  # relative to trace(H): keeps the solve defined along an exactly degenerate direction
+PlaneTarget = VoxelMap  # transitional: the old target's name, still imported by test/test_pipeline.py; drop with it
 
 
-class PlaneTarget:
-    """A target cloud with its k-d tree and normals, built once and reused while it is the reference."""
+@dataclass
+class PolishResult:
+    """The ICP's estimate and the information of its last correspondences."""
 
-    def __init__(self, points: np.ndarray) -> None:
-        self.points = np.asarray(points, dtype=np.float64)
-        self.tree = cKDTree(self.points)
-        self.normals = estimate_normals(self.points, self.tree)
+    T_target_source: np.ndarray  # (4, 4)
+    hessian: np.ndarray  # (6, 6) J^T W J at the final estimate, order [rotation (rad), translation (m)]
+    residual_variance: float  # weighted mean of squared point-to-plane residuals (m^2) at the end
+    n_pairs: int  # pairs at the final estimate (those of the Hessian)
+    iterations: int  # Gauss-Newton steps taken
 
 
-def point_to_plane_icp(source: np.ndarray, target: PlaneTarget, initial: np.ndarray, start_distance: float,
-                       end_distance: float, iters: int) -> np.ndarray:
-    """Refine ``initial`` (4x4, source -> target) by ``iters`` Gauss-Newton point-to-plane steps.
+@numba.njit(fastmath=FAST)
+def _chunk_sums(source, lo, hi, rot, trans, max_distance, kernel_scale, view, normals, planarity, out):
+    """Add the pairs of source[lo:hi] moved by (rot, trans) to ``out`` (N_SUMS,).
 
-    The pairing distance shrinks geometrically from ``start_distance`` (catch the CEM's residual error) to
-    ``end_distance`` (no biased far pairs at the end); with fewer than MIN_PAIRS pairs the estimate stays.
+    Layout: the 21 upper-triangle entries of J^T W J (row by row), the 6 of J^T W r, sum w r^2, sum w, pairs.
     """
-    tree, normals = target.tree, target.normals
-    transform = np.array(initial, dtype=np.float64)
-    for max_distance in np.geomspace(start_distance, min(end_distance, start_distance), iters):
-        moved = source @ transform[:3, :3].T + transform[:3, 3]
-        dist, idx = tree.query(moved, distance_upper_bound=max_distance, workers=-1)
-        ok = np.isfinite(dist)
-        if ok.sum() < MIN_PAIRS:
+    pts = view[0]
+    k_sq = kernel_scale * kernel_scale
+    jac = np.empty(6)
+    for i in range(lo, hi):
+        x, y, z = source[i, 0], source[i, 1], source[i, 2]
+        rx = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z  # R p: the lever arm about the sensor
+        ry = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z
+        rz = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z
+        qx, qy, qz = rx + trans[0], ry + trans[1], rz + trans[2]
+        _, slot = nearest_slot(qx, qy, qz, max_distance, view)
+        if slot < 0 or planarity[slot] <= 0.0:
+            continue
+        nx, ny, nz = normals[slot, 0], normals[slot, 1], normals[slot, 2]
+        r = nx * (qx - pts[slot, 0]) + ny * (qy - pts[slot, 1]) + nz * (qz - pts[slot, 2])
+        robust = k_sq / (k_sq + r * r)
+        w = planarity[slot] * robust * robust  # Geman-McClure
+        jac[0], jac[1], jac[2] = ry * nz - rz * ny, rz * nx - rx * nz, rx * ny - ry * nx  # (R p) x n
+        jac[3], jac[4], jac[5] = nx, ny, nz
+        k = 0
+        for a in range(6):
+            wa = w * jac[a]
+            for b in range(a, 6):
+                out[k] += wa * jac[b]
+                k += 1
+            out[21 + a] += wa * r
+        out[27] += w * r * r
+        out[28] += w
+        out[29] += 1.0
+
+
+@numba.njit(parallel=True)
+def _normal_equations(source, rot, trans, max_distance, kernel_scale, view, normals, planarity, partial):
+    """Per-chunk sums (rows of ``partial``, zeroed) over the pairs of ``source``, the chunks in parallel."""
+    n, n_chunks = source.shape[0], partial.shape[0]
+    with numba.parallel_chunksize(1):  # chunks handed out one by one: a slow thread takes fewer
+        for c in numba.prange(n_chunks):
+            _chunk_sums(source, c * n // n_chunks, (c + 1) * n // n_chunks, rot, trans, max_distance, kernel_scale,
+                        view, normals, planarity, partial[c])
+
+
+def _linearise(target: VoxelMap, source: np.ndarray, rot: np.ndarray, trans: np.ndarray, max_distance: float,
+               kernel_scale: float) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """(J^T W J (6, 6), J^T W r (6,), weighted residual variance, pairs) of ``source`` moved by (rot, trans)."""
+    _, normals, planarity = target.slot_arrays()
+    partial = np.zeros((CHUNKS_PER_THREAD * numba.get_num_threads(), N_SUMS))
+    _normal_equations(source, rot, trans, max_distance, kernel_scale, target.view(), normals, planarity, partial)
+    sums = partial.sum(axis=0)
+    hessian = np.empty((6, 6))
+    hessian[UPPER] = sums[:21]
+    hessian.T[UPPER] = sums[:21]
+    variance = float(sums[27] / sums[28]) if sums[28] > 0.0 else 0.0
+    return hessian, sums[21:27], variance, int(sums[29])
+
+
+def _exp_so3(w: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the rotation vector ``w`` (Rodrigues)."""
+    angle = float(np.linalg.norm(w))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = w / angle
+    skew = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * skew + (1.0 - np.cos(angle)) * skew @ skew
+
+
+def point_to_plane_icp(target: VoxelMap, source: np.ndarray, initial: np.ndarray, max_distance: float,
+                       iters: int, *, kernel_scale: Optional[float] = None, min_pairs: int = 10,
+                       convergence: float = 1e-4) -> PolishResult:
+    """Refine ``initial`` (4x4, source -> target map) by at most ``iters`` Gauss-Newton point-to-plane steps.
+
+    Stops early once a step moves less than ``convergence`` (rad and m); with fewer than ``min_pairs`` pairs
+    the estimate stays. ``kernel_scale`` (m) of the Geman-McClure weights defaults to max_distance / 3. The
+    Hessian, variance and pair count are those of the returned estimate (one correspondence pass after the
+    last step). A spatially coherent ``source`` order (a scan's own) runs ~20% faster than a random one: its
+    consecutive queries share cache lines of the map.
+    """
+    source = np.ascontiguousarray(source, dtype=np.float64).reshape(-1, 3)
+    max_distance = float(max_distance)
+    kernel_scale = max_distance / 3.0 if kernel_scale is None else float(kernel_scale)
+    initial = np.asarray(initial, dtype=np.float64)
+    rot, trans = initial[:3, :3].copy(), initial[:3, 3].copy()
+    hessian, gradient, variance, n_pairs = _linearise(target, source, rot, trans, max_distance, kernel_scale)
+    done = 0
+    while done < iters and n_pairs >= max(min_pairs, 1):
+        delta = np.linalg.solve(hessian + DAMPING * np.trace(hessian) * np.eye(6), -gradient)
+        rot = _exp_so3(delta[:3]) @ rot
+        trans = trans + delta[3:]
+        done += 1
+        hessian, gradient, variance, n_pairs = _linearise(target, source, rot, trans, max_distance, kernel_scale)
+        if np.linalg.norm(delta[:3]) < convergence and np.linalg.norm(delta[3:]) < convergence:
             break
-        p, q, n = moved[ok], target.points[idx[ok]], normals[idx[ok]]
-        residual = np.einsum("ij,ij->i", p - q, n)
-        jacobian = np.hstack([np.cross(p, n), n])  # d(residual)/d(rotation vector, translation)
-        delta = np.linalg.solve(jacobian.T @ jacobian + 1e-9 * np.eye(6), -jacobian.T @ residual)
-        angle = np.linalg.norm(delta[:3])
-        step = np.eye(4)
-        if angle > 0:
-            axis = delta[:3] / angle
-            skew = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-            step[:3, :3] = np.eye(3) + np.sin(angle) * skew + (1 - np.cos(angle)) * skew @ skew
-        step[:3, 3] = delta[3:]
-        transform = step @ transform
-    return transform
+    T_target_source = np.eye(4)
+    T_target_source[:3, :3], T_target_source[:3, 3] = rot, trans
+    return PolishResult(T_target_source, hessian, variance, n_pairs, done)
+
+
+def compile_kernels() -> None:
+    """Compile the map's and the ICP's kernels on a tiny map now, so that the first scan is not the slow one."""
+    compile_map_kernels()
+    points = np.random.default_rng(0).random((64, 3))
+    target = VoxelMap(0.5, max_points_per_voxel=4)
+    target.update(points, np.zeros(3))
+    point_to_plane_icp(target, points, np.eye(4), 0.3, 1)

@@ -80,8 +80,10 @@ PARAMETERS = {
     "qos_depth": (5, "input QoS history depth", _int_range(1, 1000)),
     "queue_size": (2, "scans waiting for the worker; when full the oldest is dropped", _int_range(1, 100)),
     "prior": (_DEFAULTS.prior, "CEM initial distribution: 'motion' (constant velocity), 'network' or 'identity'", None),
-    "prior_sigma_rotation": (_DEFAULTS.prior_sigma_rotation, "motion prior spread of the rotations (rad)", _float_range(1e-4, 3.2)),
-    "prior_sigma_translation": (_DEFAULTS.prior_sigma_translation, "motion prior spread of the translation (m)", _float_range(1e-4, 1000.0)),
+    "initial_rotation": (_DEFAULTS.adaptive.initial_rotation, "tracking CEM spread of the rotations (rad) until "
+                         "prediction errors have been observed (then adaptive)", _float_range(1e-4, 3.2)),
+    "initial_translation": (_DEFAULTS.adaptive.initial_translation, "tracking CEM spread of the translation (m) "
+                            "until prediction errors have been observed (then adaptive)", _float_range(1e-4, 1000.0)),
     "identity_sigma": (_DEFAULTS.identity_sigma, "identity prior spread (rad and network units)", _float_range(1e-4, 10.0)),
     "scale": (_DEFAULTS.scale, "metres per network unit; 0 = auto (robust radius of the first target cloud)",
               _float_range(0.0, 10000.0)),
@@ -95,12 +97,21 @@ PARAMETERS = {
     "n_fused_iters": (_CEM.n_fused_iters, "CEM iterations fusing the after-ICP ('future') reward (paper: 3)",
                       _int_range(0, 1000)),
     "epsilon": (_CEM.epsilon, "max-consensus truncation distance (network units)", _float_range(1e-4, 10.0)),
-    "refine_iters": (_DEFAULTS.refine_iters, "point-to-plane ICP steps on the voxel clouds after the CEM; 0 = pure CEMNet",
-                     _int_range(0, 100)),
-    "refine_points": (_DEFAULTS.refine_points, "source points the ICP polish uses at most (seeded subset)",
+    "refine_iters": (_DEFAULTS.refine_iters, "point-to-plane polish iterations against the map (at most)",
+                     _int_range(1, 100)),
+    "refine_points": (_DEFAULTS.refine_points, "source points the polish uses at most (seeded subset)",
                       _int_range(10, 10_000_000)),
-    "fitness_threshold": (_DEFAULTS.fitness_threshold, "below this fitness a step is flagged, its covariance inflated and the motion "
-                               "prediction used", _float_range(0.0, 1.0)),
+    "min_fitness": (_DEFAULTS.health.min_fitness, "inlier fraction after the polish below which a step is flagged "
+                    "(the motion prediction is published, the global search runs next)", _float_range(0.0, 0.99)),
+    "min_conditioning": (_DEFAULTS.health.min_conditioning, "smallest/largest eigenvalue of the polish's normalised "
+                         "Hessian below which a step is degenerate (flagged, prediction kept along the free "
+                         "direction)", _float_range(0.0, 0.99)),
+    "recovery_radius": (_DEFAULTS.recovery.recovery_radius, "global search: translation radius (m) around the "
+                        "prediction; yaw is searched over the full circle", _float_range(0.0, 1000.0)),
+    "recovery_gap": (_DEFAULTS.recovery.recovery_gap, "a stamp gap longer than this (s) triggers the global search",
+                     _float_range(1e-3, 3600.0)),
+    "time_budget_s": (_DEFAULTS.recovery.search.time_budget_s, "global search: time budget of its coarse scatter "
+                      "(s; half of it at most)", _float_range(0.01, 60.0)),
     "weights": ("", "sampling network weights (.npz, or an official .pth with allow_pickle); '' = package weights",
                 None),
     "allow_pickle": (False, "allow loading pickled (.pth) weights: only for files you trust", None),
@@ -145,11 +156,13 @@ class AlignNode(Node):
         self._lock = threading.Lock()  # counters and pairing buffers
         self._rejected: collections.Counter = collections.Counter()
         self._flagged = 0
+        self._recoveries = 0
         self._last_warn: dict = {}
         self._last_step: Optional[AlignmentStep] = None
         self._last_stamp_ns: Optional[int] = None
         self._last_diag = (0, 0, 0, 0)  # rejected, drops, errors, flagged at the previous report
         self._reset_requested = threading.Event()
+        self._relocalize_requested = threading.Event()
 
         self._pose_pub = self.create_publisher(PoseStamped, "~/pose", 10)
         self._odom_pub = self.create_publisher(Odometry, "~/odometry", 10)
@@ -177,6 +190,7 @@ class AlignNode(Node):
             self.create_subscription(PointCloud2, p["source_topic"], self._on_source, input_qos)
             self.create_subscription(PointCloud2, p["target_topic"], self._on_target, target_qos)
         self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(Trigger, "~/relocalize", self._on_relocalize)
         self.create_timer(1.0, self._publish_diagnostics)
         self._worker = BoundedWorker(self._process, maxsize=p["queue_size"], on_error=self._on_worker_error,
                                      name="cemnet_align")
@@ -260,6 +274,9 @@ class AlignNode(Node):
             self._reset_requested.clear()
             self._aligner.reset()
             self._last_stamp_ns = None
+        if self._relocalize_requested.is_set():
+            self._relocalize_requested.clear()
+            self._aligner.request_recovery()
         try:
             if isinstance(item, Scan):
                 source, frame = item, self._odom_frame
@@ -271,6 +288,8 @@ class AlignNode(Node):
         except ScanRejected as exc:
             self._reject("preprocessing", str(exc))
             return
+        with self._lock:
+            self._recoveries += int(step.recovered)
         if not step.accepted:
             with self._lock:
                 self._flagged += 1
@@ -334,6 +353,13 @@ class AlignNode(Node):
         self.get_logger().info("reset requested")
         return response
 
+    def _on_relocalize(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._relocalize_requested.set()
+        response.success = True
+        response.message = "relocalize: the next scan runs the global search against the local map"
+        self.get_logger().info("relocalization requested")
+        return response
+
     def _publish_diagnostics(self) -> None:
         stats = self._worker.stats()
         step = self._last_step
@@ -358,6 +384,9 @@ class AlignNode(Node):
             "last_fitness": "" if step is None else round(step.fitness, 4),
             "last_accepted": "" if step is None else step.accepted,
             "last_reason": "" if step is None else step.reason,
+            "last_recovered": "" if step is None else step.recovered,
+            "last_degenerate": "" if step is None else step.degenerate,
+            "recoveries": self._recoveries,
             "flagged_steps": flagged, "rejected_inputs": total_rejected,
             "scale_m_per_unit": "" if self._aligner.scale is None else round(self._aligner.scale, 4),
         }

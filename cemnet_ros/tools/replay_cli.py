@@ -35,7 +35,8 @@ POSE_TOPIC, ODOM_TOPIC, CLOUD_TOPIC = "/cemnet/pose", "/cemnet/odometry", "/cemn
 OVERRIDES = {
     "prior": str, "n_candidates": int, "n_iters": int, "n_fused_iters": int, "n_points": int, "scale": float,
     "voxel_size": float, "refine_icp_steps": int, "refine_iters": int, "refine_points": int, "min_range": float,
-    "max_range": float, "sampling": str, "weights": str, "fitness_threshold": float, "seed": int,
+    "max_range": float, "sampling": str, "weights": str, "min_fitness": float, "seed": int,
+    "recovery_radius": float, "min_conditioning": float, "time_budget_s": float,
 }
 
 

@@ -1,0 +1,135 @@
+"""Global CEM search: the cross-entropy method started from the whole space of plausible motions.
+
+Local registration (ICP, or a CEM around a prediction) falls into the nearest minimum. The CEM's sampling needs
+no initial guess, so a wide search survives what breaks local methods (the first pair, a dropout, a kidnap):
+
+1. **scatter**: candidates drawn uniformly over yaw (the full circle about the cloud's z axis), uniformly over a
+   disc of translations around a centre, with small roll, pitch and height spreads (a ground robot);
+2. **score coarsely**: each candidate's fused reward (the paper's current + after-ICP max-consensus) at a coarse
+   epsilon, so that candidates in the right basin score even when they are metres off;
+3. **keep distinct hypotheses**: the best candidates, at most one per (yaw, translation) neighbourhood;
+4. **refine each with the CEM** at the fine epsilon (sparsemax-weighted refits, fused reward in the first
+   iterations, as in Algorithm 1 of the paper), all hypotheses in one batch;
+5. **rank** them by their final max-consensus fitness.
+
+Everything is in the engine's units (clouds scaled to the ModelNet unit sphere) and actions
+``[euler z, y, x, tx, ty, tz]``.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+import torch
+
+from .config import CEMConfig
+from .engine import CEMNet
+from .geometry import euler_to_matrix_np
+from .scoring import CandidateScorer
+
+SCATTER_CHUNK = 500  # candidates scored between two looks at the clock
+
+
+@dataclass
+class GlobalSearchConfig:
+    """How wide and how long the global search looks (units: radians and engine units)."""
+
+    n_scatter: int = 2000  # candidates of the coarse scatter over yaw and translation
+    coarse_epsilon: float = 0.2  # epsilon of the coarse scoring (the fine stages use CEMConfig.epsilon)
+    tilt_sigma: float = 0.03  # rad: roll and pitch spread of the scatter
+    height_sigma: float = 0.01  # units: z spread of the scatter
+    n_hypotheses: int = 4  # distinct hypotheses refined by the CEM
+    min_separation_yaw: float = 0.3  # rad: hypotheses closer in yaw AND translation count as one
+    min_separation_translation: float = 0.1  # units
+    refine_sigma: tuple[float, ...] = (0.15, 0.02, 0.02, 0.05, 0.05, 0.01)  # initial CEM spread per hypothesis
+    refine: CEMConfig = field(default_factory=lambda: CEMConfig(n_candidates=200, n_iters=5, n_fused_iters=2))
+    time_budget_s: float = 1.0  # the scatter is scored in chunks until half of this is spent (one chunk at least)
+
+    def __post_init__(self) -> None:
+        if self.n_scatter < self.n_hypotheses or self.n_hypotheses < 1:
+            raise ValueError("need n_scatter >= n_hypotheses >= 1")
+        if self.coarse_epsilon <= 0:
+            raise ValueError("coarse_epsilon must be > 0")
+        if len(self.refine_sigma) != 6 or min(self.refine_sigma) <= 0:
+            raise ValueError("refine_sigma must be six positive spreads")
+        if self.time_budget_s <= 0:
+            raise ValueError("time_budget_s must be > 0")
+
+
+@dataclass
+class Hypothesis:
+    """One refined answer of the global search: ``T_target_source`` (4x4, units) and its fitness in [0, 1]."""
+
+    T_target_source: np.ndarray
+    fitness: float
+    sigma: np.ndarray  # (6,) the CEM's final spread
+
+
+def scatter(centre: np.ndarray, radius: float, config: GlobalSearchConfig, rng: np.random.Generator) -> np.ndarray:
+    """(n_scatter, 6) actions: yaw uniform on the circle, translation uniform on a disc around ``centre`` (6,)."""
+    n = config.n_scatter
+    r, angle = radius * np.sqrt(rng.uniform(0.0, 1.0, n)), rng.uniform(-np.pi, np.pi, n)
+    actions = np.empty((n, 6))
+    actions[:, 0] = centre[0] + rng.uniform(-np.pi, np.pi, n)
+    actions[:, 1] = centre[1] + rng.normal(0.0, config.tilt_sigma, n)
+    actions[:, 2] = centre[2] + rng.normal(0.0, config.tilt_sigma, n)
+    actions[:, 3] = centre[3] + r * np.cos(angle)
+    actions[:, 4] = centre[4] + r * np.sin(angle)
+    actions[:, 5] = centre[5] + rng.normal(0.0, config.height_sigma, n)
+    return actions
+
+
+def distinct_best(actions: np.ndarray, cost: np.ndarray, config: GlobalSearchConfig) -> np.ndarray:
+    """The lowest-cost actions, skipping any within the separation of one already kept (greedy suppression)."""
+    kept: list[np.ndarray] = []
+    for i in np.argsort(cost):
+        a = actions[i]
+        if all(abs(np.angle(np.exp(1j * (a[0] - k[0])))) > config.min_separation_yaw
+               or np.linalg.norm(a[3:5] - k[3:5]) > config.min_separation_translation for k in kept):
+            kept.append(a)
+            if len(kept) == config.n_hypotheses:
+                break
+    return np.array(kept)
+
+
+def action_to_transform(action: np.ndarray) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = euler_to_matrix_np(action[:3])
+    out[:3, 3] = action[3:]
+    return out
+
+
+def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, radius: float,
+                  config: Optional[GlobalSearchConfig] = None, seed: int = 0) -> list[Hypothesis]:
+    """Search ``T_target_source`` for prepared clouds (n, 3), (m, 3) in units; best hypothesis first.
+
+    ``centre`` (6,) is the action the translation disc and yaw circle are centred on (e.g. a prediction) and
+    ``radius`` the disc's radius in units.
+    """
+    start = time.perf_counter()
+    config = config or GlobalSearchConfig()
+    rng = np.random.default_rng(seed)
+    src = torch.as_tensor(np.asarray(source), dtype=torch.float32)[None]
+    tgt = torch.as_tensor(np.asarray(target), dtype=torch.float32)[None]
+    coarse = CEMConfig(epsilon=config.coarse_epsilon, icp_steps=config.refine.icp_steps,
+                       icp_max_distance=2.0 * config.coarse_epsilon)
+    actions = scatter(np.asarray(centre, dtype=np.float64), radius, config, rng)
+    scorer, costs = CandidateScorer(src, tgt, coarse), []
+    for chunk in np.array_split(actions, max(1, len(actions) // SCATTER_CHUNK)):
+        costs.append(scorer.cost(torch.from_numpy(chunk)[None], fused=True)[0].numpy())
+        if time.perf_counter() - start > 0.5 * config.time_budget_s:
+            break
+    scored = sum(len(c) for c in costs)
+    starts = distinct_best(actions[:scored], np.concatenate(costs), config)
+    k = len(starts)
+    engine = CEMNet(config.refine)
+    out = engine(src.expand(k, -1, -1), tgt.expand(k, -1, -1),  # broadcast: one lattice for all hypotheses
+                 torch.as_tensor(starts, dtype=torch.float32),
+                 torch.tensor(config.refine_sigma, dtype=torch.float32).expand(k, 6).contiguous(),
+                 generator=torch.Generator().manual_seed(seed))
+    mu, sigma, fitness = out.mu.double().numpy(), out.sigma.double().numpy(), out.fitness.double().numpy()
+    order = np.argsort(-fitness)
+    return [Hypothesis(action_to_transform(mu[i]), float(fitness[i]), sigma[i]) for i in order]
+

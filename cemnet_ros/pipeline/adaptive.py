@@ -1,0 +1,63 @@
+"""Adaptive tracking spread: how far the CEM looks and the polish pairs, from the motion model's recent errors.
+
+The idea of KISS-ICP's adaptive threshold: the constant-velocity prediction is wrong by about as much as it was
+wrong lately, so the search around it should be a few times that error, never fixed. Before any error has been
+observed the initial spreads hold; the spreads also grow with the time since the last scan (a dropped scan
+doubles the motion the prediction extrapolates).
+"""
+from __future__ import annotations
+
+import collections
+from dataclasses import dataclass
+
+import numpy as np
+
+from cemnet_ros.core.geometry import rotation_angle_rad
+
+
+@dataclass
+class AdaptiveConfig:
+    """Spreads in radians and metres; ``factor`` times the RMS prediction error, clipped to [min, max]."""
+
+    initial_rotation: float = 0.05
+    initial_translation: float = 0.5
+    min_rotation: float = 0.01
+    min_translation: float = 0.1
+    max_rotation: float = 0.5
+    max_translation: float = 5.0
+    factor: float = 3.0
+    window: int = 100  # prediction errors remembered
+
+    def __post_init__(self) -> None:
+        if not 0 < self.min_rotation <= self.max_rotation or not 0 < self.min_translation <= self.max_translation:
+            raise ValueError("adaptive spreads need 0 < min <= max")
+        if self.initial_rotation <= 0 or self.initial_translation <= 0 or self.factor <= 0 or self.window < 1:
+            raise ValueError("initial spreads, factor and window must be > 0")
+
+
+class AdaptiveSpread:
+    """Running RMS of the prediction errors (rotation, translation) of accepted steps."""
+
+    def __init__(self, config: AdaptiveConfig) -> None:
+        self.config = config
+        self._errors: collections.deque = collections.deque(maxlen=config.window)
+
+    def reset(self) -> None:
+        self._errors.clear()
+
+    def update(self, T_predicted_actual: np.ndarray) -> None:
+        """Record how far an accepted pose was from its prediction (``inv(T_pred) @ T_final``)."""
+        self._errors.append((rotation_angle_rad(T_predicted_actual[:3, :3]),
+                             float(np.linalg.norm(T_predicted_actual[:3, 3]))))
+
+    def spread(self, dt_ratio: float = 1.0) -> tuple[float, float]:
+        """(rotation rad, translation m) to search around the prediction; ``dt_ratio`` = dt / usual dt."""
+        c = self.config
+        if not self._errors:
+            rotation, translation = c.initial_rotation, c.initial_translation
+        else:
+            rms = np.sqrt(np.mean(np.square(np.asarray(self._errors)), axis=0))
+            rotation, translation = c.factor * rms[0], c.factor * rms[1]
+        stretch = max(1.0, float(dt_ratio))
+        return (float(np.clip(rotation * stretch, c.min_rotation, c.max_rotation)),
+                float(np.clip(translation * stretch, c.min_translation, c.max_translation)))

@@ -1,0 +1,116 @@
+"""Adaptive spread, failure signals, Hessian covariance and degenerate directions (no engine needed)."""
+import numpy as np
+import pytest
+
+from cemnet_ros.pipeline.adaptive import AdaptiveConfig, AdaptiveSpread
+from cemnet_ros.pipeline.covariance import (MIN_STD_ROTATION, Conditioning, covariance_from_hessian,
+                                            flat_covariance, keep_prediction_along)
+from cemnet_ros.pipeline.health import HealthConfig, HealthMonitor, Signals
+from street_scene import make_transform
+
+GOOD = Signals(fitness=0.8, disagreement_m=0.05, disagreement_rad=0.005, conditioning=0.3, spread_m=0.1)
+
+
+def with_(**changes):
+    return Signals(**{**vars(GOOD), **changes})
+
+
+# -- adaptive spread ------------------------------------------------------------------------------------------
+def test_spread_starts_at_the_initial_values_then_follows_the_prediction_errors():
+    spread = AdaptiveSpread(AdaptiveConfig(initial_rotation=0.05, initial_translation=0.5, factor=3.0))
+    assert spread.spread() == (0.05, 0.5)
+    for _ in range(10):
+        spread.update(make_transform(yaw=0.01, t=(0.2, 0.0, 0.0)))
+    rotation, translation = spread.spread()
+    assert rotation == pytest.approx(0.03) and translation == pytest.approx(0.6)
+    assert spread.spread(dt_ratio=2.0) == pytest.approx((0.06, 1.2))  # a dropped scan widens the search
+    spread.reset()
+    assert spread.spread() == (0.05, 0.5)
+
+
+def test_spread_is_clipped():
+    config = AdaptiveConfig(min_rotation=0.01, min_translation=0.1, max_rotation=0.2, max_translation=2.0)
+    spread = AdaptiveSpread(config)
+    spread.update(np.eye(4))
+    assert spread.spread() == (0.01, 0.1)
+    spread.update(make_transform(yaw=3.0, t=(50.0, 0, 0)))
+    assert spread.spread() == (0.2, 2.0)
+    with pytest.raises(ValueError):
+        AdaptiveConfig(min_rotation=0.5, max_rotation=0.1)
+
+
+# -- failure signals ------------------------------------------------------------------------------------------
+def test_each_failure_signal_flags_on_its_own():
+    monitor = HealthMonitor(HealthConfig())
+    assert monitor.failures(GOOD) == [] and not monitor.degenerate(GOOD)
+    assert "low fitness" in monitor.failures(with_(fitness=0.1))[0]
+    assert "disagree" in monitor.failures(with_(disagreement_m=2.0))[0]
+    assert "disagree" in monitor.failures(with_(disagreement_rad=0.2))[0]
+    assert "spread" in monitor.failures(with_(spread_m=5.0))[0]
+    assert monitor.failures(with_(spread_m=5.0), use_spread=False) == []
+    assert monitor.degenerate(with_(conditioning=0.001)) and monitor.failures(with_(conditioning=0.001)) == []
+
+
+def test_fitness_is_judged_against_its_running_level():
+    monitor = HealthMonitor(HealthConfig(min_fitness=0.2, fitness_drop=0.7, level_memory=0.5))
+    assert monitor.failures(with_(fitness=0.4)) == []  # no level yet: the absolute floor only
+    for _ in range(20):
+        monitor.accept(0.9)
+    assert monitor.level == pytest.approx(0.9)
+    assert "running level" in monitor.failures(with_(fitness=0.5))[0]
+    assert monitor.failures(with_(fitness=0.7)) == []
+    monitor.reset()
+    assert monitor.level is None
+
+
+# -- covariance and degenerate directions -----------------------------------------------------------------
+def corridor_hessian(length=10.0):
+    """Point-to-plane Hessian of a corridor along x: normals +-y (walls) and +-z (floor, ceiling) only."""
+    rng = np.random.default_rng(0)
+    rows = []
+    for normal in ([0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]):
+        n = np.array(normal, float)
+        for _ in range(200):
+            p = np.r_[rng.uniform(-length, length), rng.uniform(-1.5, 1.5, 2)]
+            p[np.argmax(np.abs(n))] = 1.5 * n[np.argmax(np.abs(n))]
+            rows.append(np.r_[np.cross(p, n), n])
+    jacobian = np.array(rows)
+    return jacobian.T @ jacobian
+
+
+def test_corridor_is_degenerate_along_its_axis_and_the_covariance_grows_there():
+    conditioning = Conditioning.of(corridor_hessian(), length=5.0)
+    assert conditioning.ratio < 1e-6
+    basis = conditioning.degenerate_basis(0.02)
+    assert basis.shape[1] == 1 and abs(basis[3, 0]) > 0.99  # translation along x
+    cov = covariance_from_hessian(conditioning, 1e-4, degenerate_variance=0.5 ** 2, min_ratio=0.02)
+    np.testing.assert_allclose(cov, cov.T)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    assert cov[0, 0] > 100 * cov[1, 1] and cov[0, 0] == pytest.approx(0.25, rel=0.01)
+
+
+def test_well_constrained_covariance_is_sigma_squared_h_inverse():
+    rng = np.random.default_rng(1)
+    jacobian = rng.normal(size=(500, 6))
+    hessian = jacobian.T @ jacobian
+    cov = covariance_from_hessian(Conditioning.of(hessian, 1.0), 0.01, degenerate_variance=1.0, min_ratio=1e-6)
+    expected = 0.01 * np.linalg.inv(hessian)
+    order = [3, 4, 5, 0, 1, 2]
+    np.testing.assert_allclose(cov - np.diag(np.r_[np.full(3, 1e-6), np.full(3, MIN_STD_ROTATION ** 2)]),
+                               expected[np.ix_(order, order)], rtol=1e-6, atol=1e-12)
+    inflated = covariance_from_hessian(Conditioning.of(hessian, 1.0), 0.01, 1.0, 1e-6, inflate=100.0)
+    assert np.all(np.diag(inflated) > 50 * np.diag(cov))
+
+
+def test_keep_prediction_along_replaces_only_the_free_direction():
+    conditioning = Conditioning.of(corridor_hessian(), length=5.0)
+    predicted = make_transform(yaw=0.1, t=(1.0, 0.0, 0.0))
+    registered = make_transform(yaw=0.12, t=(0.2, 0.05, 0.01))  # along x the registration is arbitrary
+    kept = keep_prediction_along(conditioning.degenerate_basis(0.02), 5.0, predicted, registered)
+    np.testing.assert_allclose(kept[:3, 3], [1.0, 0.05, 0.01], atol=1e-9)
+    np.testing.assert_allclose(kept[:3, :3], registered[:3, :3], atol=1e-9)
+
+
+def test_flat_covariance_is_floored():
+    cov = flat_covariance(0.0, 0.0)
+    assert np.linalg.matrix_rank(cov) == 6 and np.all(np.diag(cov) > 0)
