@@ -47,7 +47,7 @@ def test_distinct_best_suppresses_neighbours():
     actions[1, 0] = 0.1  # same basin as 0
     actions[2, 0] = 2.0
     actions[3, 3] = 0.5
-    kept = distinct_best(actions, np.array([0.0, 0.1, 0.2, 0.3]), GlobalSearchConfig(n_hypotheses=4))
+    kept = distinct_best(actions, np.array([0.0, 0.1, 0.2, 0.3]), GlobalSearchConfig(), 4)
     np.testing.assert_array_equal(kept, actions[[0, 2, 3]])
 
 

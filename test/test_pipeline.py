@@ -13,7 +13,6 @@ from cemnet_ros.pipeline.aligner import AlignerConfig, ScanAligner, ScanRejected
 from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
 from cemnet_ros.pipeline.preprocess import (crop_range, farthest_point_indices, finite_points, robust_radius,
                                             subsample, voxel_downsample)
-from cemnet_ros.pipeline.refine import PlaneTarget, point_to_plane_icp
 from cemnet_ros.pipeline.worker import BoundedWorker
 from street_scene import make_transform, make_world
 

@@ -47,7 +47,7 @@ def test_each_failure_signal_flags_on_its_own():
     assert "disagree" in monitor.failures(with_(disagreement_m=2.0))[0]
     assert "disagree" in monitor.failures(with_(disagreement_rad=0.2))[0]
     assert "spread" in monitor.failures(with_(spread_m=5.0))[0]
-    assert monitor.failures(with_(spread_m=5.0), use_spread=False) == []
+    assert monitor.failures(with_(spread_m=5.0, disagreement_m=2.0), recovery=True) == []
     assert monitor.degenerate(with_(conditioning=0.001)) and monitor.failures(with_(conditioning=0.001)) == []
 
 

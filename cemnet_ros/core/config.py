@@ -30,6 +30,9 @@ class CEMConfig:
     icp_max_distance: Optional[float] = None
     # Optional point-to-point ICP refinement of mu_T (0 = off = the paper's method).
     refine_icp_steps: int = 0
+    # CPU look-up lattice spacing in units of epsilon: finer = more often the exact nearest neighbour, coarser =
+    # a smaller lattice (faster to build, fewer cache misses on large scenes).
+    lattice_spacing: float = 0.25
     seed: Optional[int] = 0
 
     def __post_init__(self) -> None:
@@ -47,6 +50,8 @@ class CEMConfig:
             raise ValueError("exploration_weight must lie in [0, 1]")
         if self.icp_steps < 0 or self.refine_icp_steps < 0:
             raise ValueError("ICP step counts must be >= 0")
+        if not 0.0 < self.lattice_spacing <= 1.0:
+            raise ValueError("lattice_spacing must lie in (0, 1]")
 
     @property
     def icp_radius(self) -> float:

@@ -7,10 +7,12 @@ no initial guess, so a wide search survives what breaks local methods (the first
    disc of translations around a centre, with small roll, pitch and height spreads (a ground robot);
 2. **score coarsely**: each candidate's fused reward (the paper's current + after-ICP max-consensus) at a coarse
    epsilon, so that candidates in the right basin score even when they are metres off;
-3. **keep distinct hypotheses**: the best candidates, at most one per (yaw, translation) neighbourhood;
-4. **refine each with the CEM** at the fine epsilon (sparsemax-weighted refits, fused reward in the first
+3. **resample**: new candidates around the best distinct ones, scored the same way (one cross-entropy step of a
+   mixture: the scatter finds the basins, the resampling fills them);
+4. **keep distinct hypotheses**: the best candidates, at most one per (yaw, translation) neighbourhood;
+5. **refine each with the CEM** at the fine epsilon (sparsemax-weighted refits, fused reward in the first
    iterations, as in Algorithm 1 of the paper), all hypotheses in one batch;
-5. **rank** them by their final max-consensus fitness.
+6. **rank** them by their final max-consensus fitness.
 
 Everything is in the engine's units (clouds scaled to the ModelNet unit sphere) and actions
 ``[euler z, y, x, tx, ty, tz]``.
@@ -41,15 +43,20 @@ class GlobalSearchConfig:
     tilt_sigma: float = 0.03  # rad: roll and pitch spread of the scatter
     height_sigma: float = 0.01  # units: z spread of the scatter
     n_hypotheses: int = 4  # distinct hypotheses refined by the CEM
+    n_seeds: int = 16  # distinct scatter candidates resampled around
+    n_per_seed: int = 50  # candidates drawn around each
+    resample_sigma: tuple[float, ...] = (0.1, 0.02, 0.02, 0.03, 0.03, 0.005)  # their spread (rad, units)
     min_separation_yaw: float = 0.3  # rad: hypotheses closer in yaw AND translation count as one
     min_separation_translation: float = 0.1  # units
     refine_sigma: tuple[float, ...] = (0.15, 0.02, 0.02, 0.05, 0.05, 0.01)  # initial CEM spread per hypothesis
     refine: CEMConfig = field(default_factory=lambda: CEMConfig(n_candidates=200, n_iters=5, n_fused_iters=2))
-    time_budget_s: float = 1.0  # the scatter is scored in chunks until half of this is spent (one chunk at least)
+    time_budget_s: float = 1.0  # scatter / resampling stop scoring at 50 / 75 % of it (one chunk at least)
 
     def __post_init__(self) -> None:
-        if self.n_scatter < self.n_hypotheses or self.n_hypotheses < 1:
-            raise ValueError("need n_scatter >= n_hypotheses >= 1")
+        if self.n_scatter < max(self.n_hypotheses, self.n_seeds) or min(self.n_hypotheses, self.n_seeds) < 1:
+            raise ValueError("need n_scatter >= n_hypotheses, n_seeds >= 1")
+        if self.n_per_seed < 0 or len(self.resample_sigma) != 6 or min(self.resample_sigma) <= 0:
+            raise ValueError("n_per_seed must be >= 0 and resample_sigma six positive spreads")
         if self.coarse_epsilon <= 0:
             raise ValueError("coarse_epsilon must be > 0")
         if len(self.refine_sigma) != 6 or min(self.refine_sigma) <= 0:
@@ -81,17 +88,30 @@ def scatter(centre: np.ndarray, radius: float, config: GlobalSearchConfig, rng: 
     return actions
 
 
-def distinct_best(actions: np.ndarray, cost: np.ndarray, config: GlobalSearchConfig) -> np.ndarray:
-    """The lowest-cost actions, skipping any within the separation of one already kept (greedy suppression)."""
+def distinct_best(actions: np.ndarray, cost: np.ndarray, config: GlobalSearchConfig, count: int) -> np.ndarray:
+    """The ``count`` lowest-cost actions, skipping any within the separation of one already kept."""
     kept: list[np.ndarray] = []
     for i in np.argsort(cost):
         a = actions[i]
         if all(abs(np.angle(np.exp(1j * (a[0] - k[0])))) > config.min_separation_yaw
                or np.linalg.norm(a[3:5] - k[3:5]) > config.min_separation_translation for k in kept):
             kept.append(a)
-            if len(kept) == config.n_hypotheses:
+            if len(kept) == count:
                 break
     return np.array(kept)
+
+
+def _score_within(scorer: CandidateScorer, actions: np.ndarray, deadline: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fused costs of ``actions`` in chunks until ``deadline`` (perf_counter; one chunk at least); scored ones."""
+    costs: list[np.ndarray] = []
+    if len(actions) == 0:
+        return actions, np.zeros(0)
+    for chunk in np.array_split(actions, max(1, len(actions) // SCATTER_CHUNK)):
+        costs.append(scorer.cost(torch.from_numpy(chunk)[None], fused=True)[0].numpy())
+        if time.perf_counter() > deadline:
+            break
+    cost = np.concatenate(costs) if costs else np.zeros(0)
+    return actions[:len(cost)], cost
 
 
 def action_to_transform(action: np.ndarray) -> np.ndarray:
@@ -115,14 +135,15 @@ def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, ra
     tgt = torch.as_tensor(np.asarray(target), dtype=torch.float32)[None]
     coarse = CEMConfig(epsilon=config.coarse_epsilon, icp_steps=config.refine.icp_steps,
                        icp_max_distance=2.0 * config.coarse_epsilon)
+    scorer = CandidateScorer(src, tgt, coarse)
     actions = scatter(np.asarray(centre, dtype=np.float64), radius, config, rng)
-    scorer, costs = CandidateScorer(src, tgt, coarse), []
-    for chunk in np.array_split(actions, max(1, len(actions) // SCATTER_CHUNK)):
-        costs.append(scorer.cost(torch.from_numpy(chunk)[None], fused=True)[0].numpy())
-        if time.perf_counter() - start > 0.5 * config.time_budget_s:
-            break
-    scored = sum(len(c) for c in costs)
-    starts = distinct_best(actions[:scored], np.concatenate(costs), config)
+    actions, cost = _score_within(scorer, actions, start + 0.5 * config.time_budget_s)
+    seeds = distinct_best(actions, cost, config, config.n_seeds)
+    around = (seeds[:, None, :] + rng.normal(size=(len(seeds), config.n_per_seed, 6))
+              * np.asarray(config.resample_sigma)).reshape(-1, 6)
+    around, around_cost = _score_within(scorer, around, start + 0.75 * config.time_budget_s)
+    starts = distinct_best(np.vstack([actions, around]), np.concatenate([cost, around_cost]), config,
+                           config.n_hypotheses)
     k = len(starts)
     engine = CEMNet(config.refine)
     out = engine(src.expand(k, -1, -1), tgt.expand(k, -1, -1),  # broadcast: one lattice for all hypotheses

@@ -15,7 +15,7 @@ from .geometry import action_to_rt, procrustes, transform_points
 from .icp import batch_icp
 from .rewards import max_consensus_reward
 
-LATTICE_SPACING = 0.25  # CPU look-up lattice spacing, in units of epsilon
+LATTICE_SPACING = CEMConfig.lattice_spacing  # the default lattice spacing (units of epsilon), for callers without a config
 
 
 class CandidateScorer:
@@ -26,14 +26,14 @@ class CandidateScorer:
         self.source, self.target = source.detach(), target.detach()
         self.on_cpu = source.device.type == "cpu"
         if self.on_cpu:  # rewards are sums over points: any order gives them, Z-order gives them fastest
-            spacing = cem.epsilon * LATTICE_SPACING
+            spacing = cem.epsilon * cem.lattice_spacing
             self._src_np, self._src_grids = _prepare_each(self.source, cem.epsilon, spacing)
             self._tgt_np, self._tgt_grids = _prepare_each(self.target, cem.epsilon, spacing)
             self._icp_grids: list | None = None  # built on the first fused iteration only
 
     def _icp_grid(self, b: int):
         if self._icp_grids is None:
-            spacing = self.cem.epsilon * LATTICE_SPACING
+            spacing = self.cem.epsilon * self.cem.lattice_spacing
             _, self._icp_grids = _prepare_each(self.target, self.cem.icp_radius, spacing, self._tgt_np)
         return self._icp_grids[b]
 

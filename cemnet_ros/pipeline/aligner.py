@@ -28,7 +28,7 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.core import CEMConfig, Registrar, RegistrationConfig
-from cemnet_ros.core.geometry import apply_transform, matrix_to_action_np
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.core.global_search import GlobalSearchConfig, global_search
 from cemnet_ros.pipeline.adaptive import AdaptiveConfig, AdaptiveSpread
 from cemnet_ros.pipeline.covariance import (Conditioning, covariance_from_hessian, flat_covariance,
@@ -37,11 +37,13 @@ from cemnet_ros.pipeline.health import HealthConfig, HealthMonitor, Signals, dis
 from cemnet_ros.pipeline.motion import ConstantVelocity
 from cemnet_ros.pipeline.preprocess import (SAMPLING_METHODS, crop_range, finite_points, robust_radius,
                                             subsample, voxel_downsample)
-from cemnet_ros.pipeline import refine
+from cemnet_ros.pipeline import preprocess, refine
 from cemnet_ros.pipeline.refine import PolishResult, point_to_plane_icp
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 PRIORS = ("motion", "network", "identity")
+TRACKING_PAIRING = 3.0  # frame voxels: the tracking polish pairs within the adaptive spread, at most this far
+LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
 POLISH_FRACTION = 0.8  # recovery: hypotheses whose CEM fitness is this close to the best one's get polished
 
 
@@ -63,13 +65,15 @@ class RecoveryConfig:
     recovery_points: int = 1024  # source and map points the global search scores
     recovery_gap: float = 0.5  # s: a stamp gap longer than this triggers a recovery
     ambiguity_ratio: float = 0.9  # a distinct hypothesis this close in fitness makes the answer ambiguous
-    polish_distance: float = 3.0  # in frame voxels: the polish's first pairing distance after a recovery
+    polish_distance: float = 6.0  # in frame voxels: the first pairing distance of a hypothesis' polish
+    polish_iters: int = 30  # its iterations at that distance (a hypothesis can be degrees off)
+    restart_after: int = 3  # consecutive failed steps after which the map restarts from the scan (lost)
 
     def __post_init__(self) -> None:
         if self.recovery_radius < 0 or self.recovery_gap <= 0 or self.polish_distance <= 0:
             raise ValueError("recovery_radius must be >= 0, recovery_gap and polish_distance > 0")
-        if self.recovery_points < 32:
-            raise ValueError("recovery_points must be >= 32")
+        if self.recovery_points < 32 or self.restart_after < 1 or self.polish_iters < 1:
+            raise ValueError("recovery_points must be >= 32, restart_after and polish_iters >= 1")
         if not 0.0 < self.ambiguity_ratio <= 1.0:
             raise ValueError("ambiguity_ratio must lie in (0, 1]")
 
@@ -166,6 +170,13 @@ class Estimate:
     failures: list[str]  # why it cannot be vouched for: the prediction is published instead
     notes: list[str]  # why it is flagged although its pose is used (degenerate, ambiguity resolved)
     recovered: bool
+    free_directions: np.ndarray  # (6, k) normalised directions the scene leaves unconstrained
+    length: float  # the lever arm of that normalisation
+
+    def offset_from(self, T_reference: np.ndarray) -> tuple[float, float]:
+        """(metres, radians) from ``T_reference`` along the constrained directions only."""
+        return disagreement(T_reference, keep_prediction_along(self.free_directions, self.length, T_reference,
+                                                               self.T_odom_sensor))
 
     @property
     def degenerate(self) -> bool:
@@ -185,7 +196,8 @@ class ScanAligner:
         self._registrar = registrar or Registrar(dataclasses.replace(self.config.registration, prior=reg_prior))
         self._fixed_scale = self.config.scale if self.config.scale > 0 else None
         self._pair_targets: dict[int, tuple[np.ndarray, VoxelMap]] = {}
-        refine.compile_kernels()  # map and polish kernels: the first scan must not pay their compilation
+        preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
+        refine.compile_kernels()
         self.reset()
 
     @property
@@ -213,12 +225,13 @@ class ScanAligner:
         self._pose = np.eye(4)
         self._last_stamp: Optional[int] = None
         self._period_ns: Optional[int] = None
-        self._recovery_requested = False
+        self._pending_recovery = ""  # why the next scan runs the global search ("" = it tracks)
+        self._failures_in_a_row = 0
         self._pair_targets.clear()
 
     def request_recovery(self) -> None:
         """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
-        self._recovery_requested = True
+        self._pending_recovery = "requested"
 
     # -- sequential mode ------------------------------------------------------------------------------------
     def process(self, points: np.ndarray, stamp_ns: int) -> AlignmentStep:
@@ -244,20 +257,26 @@ class ScanAligner:
         restarted = self._last_stamp is not None
         reason = (f"stamp went back {(self._last_stamp - stamp_ns) * 1e-9:.3f} s: restarted from this scan, "
                   "pose kept") if restarted else ""
-        self._map = self._new_map()
-        self._map.update(apply_transform(self._pose, frame.dense), self._pose[:3, 3])
+        self._restart_map(frame, self._pose)
         self._motion.reset()
         self._motion.update(self._pose, stamp_ns)
         self._spread.reset()
-        self._health.reset()
         self._last_stamp, self._period_ns = stamp_ns, None
-        self._recovery_requested = True  # the first pair has no prediction worth the name
+        self._pending_recovery = "first pair"  # a single pose predicts nothing
         return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 1.0, not restarted,
                              time.perf_counter() - start, len(frame.sampled), reason)
 
+    def _restart_map(self, frame: Frame, T_odom_sensor: np.ndarray) -> None:
+        """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
+        self._map = self._new_map()
+        self._map.update(apply_transform(T_odom_sensor, frame.dense), T_odom_sensor[:3, 3])
+        self._health.reset()
+        self._pending_recovery = ""
+        self._failures_in_a_row = 0
+
     def _recovery_reason(self, dt_ns: int) -> str:
-        if self._recovery_requested:
-            return "first pair" if not self._motion.has_velocity and self._health.level is None else "requested"
+        if self._pending_recovery:
+            return self._pending_recovery
         if dt_ns * 1e-9 > self.config.recovery.recovery_gap:
             return f"stamp gap {dt_ns * 1e-9:.3f} s"
         return ""
@@ -268,14 +287,19 @@ class ScanAligner:
     def _commit(self, frame: Frame, stamp_ns: int, dt_ns: int, T_predicted: np.ndarray, estimate: Estimate,
                 why_recovered: str, start: float) -> AlignmentStep:
         """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
-        self._recovery_requested = False
+        self._pending_recovery = ""
         previous = self._pose
         reasons = list(estimate.failures)
         if estimate.failures:
             pose = T_predicted
-            self._recovery_requested = True  # try the global search again on the next scan
+            self._failures_in_a_row += 1
+            self._pending_recovery = "the previous step failed"
             reasons.append("motion prediction used")
+            if self._failures_in_a_row >= self.config.recovery.restart_after:
+                self._restart_map(frame, pose)
+                reasons.append(f"lost for {self._failures_in_a_row} scans: the map restarts from this scan")
         else:
+            self._failures_in_a_row = 0
             pose = estimate.T_odom_sensor
             reasons += estimate.notes
             if not estimate.recovered:  # a recovery's guess was no prediction of the motion model
@@ -391,8 +415,11 @@ class ScanAligner:
         centre = T_predicted if cfg.prior != "identity" else self._motion.last_pose
         T_cem, spread_m = self._cem(clouds, to_units, from_units, None if cfg.prior == "network" else centre, sigma)
         voxel = self._polish_voxel()
-        max_distance = max(2.0 * voxel, min(translation, cfg.recovery.polish_distance * voxel))
+        max_distance = float(np.clip(translation, 2.0 * voxel, TRACKING_PAIRING * voxel))
         polish = point_to_plane_icp(target_map, frame.polish, T_cem, max_distance, cfg.refine_iters)
+        metres, radians = disagreement(T_predicted, polish.T_target_source)
+        if metres > 3.0 * translation or radians > 3.0 * rotation:  # the motion model was wrong: look wider
+            polish = self._wide_polish(frame, target_map, polish.T_target_source)
         metres, radians = disagreement(T_cem, polish.T_target_source)
         if metres > cfg.health.max_disagreement_translation or radians > cfg.health.max_disagreement_rotation:
             T_cem, spread_m = self._cem(clouds, to_units, from_units, polish.T_target_source, sigma)
@@ -411,26 +438,28 @@ class ScanAligner:
         return T_cem, float(np.max(np.abs(result.sigma[3:]))) * self._scale
 
     def _recover(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray) -> Estimate:
-        """The global CEM search around ``T_guess``, each distinct hypothesis polished; the best one judged."""
+        """The global CEM search around ``T_guess``, each distinct hypothesis polished; the best one judged.
+
+        The scan is placed at the guess and the engine's units are centred on the guessed sensor position, so
+        that the search's yaw turns about the sensor and its translation disc is the sensor's displacement.
+        """
         cfg, rec = self.config, self.config.recovery
         target = self._map_sample(target_map, T_guess, rec.recovery_points, margin=rec.recovery_radius)
-        to_units, from_units = self._units(target.mean(axis=0))
-        source = subsample(frame.near, rec.recovery_points, "random", cfg.registration.seed or 0)
-        centre = matrix_to_action_np(to_units @ T_guess @ from_units)
-        hypotheses = global_search(apply_transform(to_units, source), apply_transform(to_units, target), centre,
+        to_units, from_units = self._units(T_guess[:3, 3])
+        # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
+        uniform = voxel_downsample(frame.near, target_map.voxel_size)
+        source = apply_transform(T_guess, subsample(uniform, rec.recovery_points, "random", cfg.registration.seed or 0))
+        hypotheses = global_search(apply_transform(to_units, source), apply_transform(to_units, target), np.zeros(6),
                                    rec.recovery_radius / self._scale, rec.search, seed=cfg.registration.seed or 0)
-        wide = rec.polish_distance * self._polish_voxel()
         estimates = []
         for hypothesis in hypotheses:
             if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
                 break  # far behind the best: not worth a polish, nor a rival
-            T_cem = from_units @ hypothesis.T_target_source @ to_units
+            T_cem = from_units @ hypothesis.T_target_source @ to_units @ T_guess
             T_cem[3] = (0.0, 0.0, 0.0, 1.0)
-            coarse = point_to_plane_icp(target_map, frame.polish, T_cem, wide, cfg.refine_iters)
-            polish = point_to_plane_icp(target_map, frame.polish, coarse.T_target_source,
-                                        2.0 * self._polish_voxel(), cfg.refine_iters)
+            polish = self._wide_polish(frame, target_map, T_cem)
             estimates.append(self._judge(frame, target_map, T_guess, T_cem, polish, 0.0, recovered=True,
-                                         prediction_std=rec.recovery_radius, agreement_scale=rec.polish_distance))
+                                         prediction_std=rec.recovery_radius))
         estimates.sort(key=lambda e: -e.signals.fitness)
         return self._resolve_ambiguity(estimates, T_guess)
 
@@ -449,8 +478,8 @@ class ScanAligner:
         if len(ties) == 1:
             return best
         rotation, translation = self._spread.spread()
-        nearest = min(ties, key=lambda e: disagreement(T_guess, e.T_odom_sensor)[0])
-        metres, radians = disagreement(T_guess, nearest.T_odom_sensor)
+        nearest = min(ties, key=lambda e: e.offset_from(T_guess)[0])
+        metres, radians = nearest.offset_from(T_guess)
         summary = (f"{len(ties)} distinct hypotheses within {self.config.recovery.ambiguity_ratio:.2f} of the best "
                    "fitness")
         if metres <= 3.0 * translation and radians <= 3.0 * rotation:
@@ -459,6 +488,13 @@ class ScanAligner:
         best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")
         return best
 
+    def _wide_polish(self, frame: Frame, target_map: VoxelMap, T_start: np.ndarray) -> PolishResult:
+        """A polish from an answer that may be a metre or degrees off: wide pairing first, then the fine one."""
+        rec, voxel = self.config.recovery, self._polish_voxel()
+        coarse = point_to_plane_icp(target_map, frame.polish, T_start, rec.polish_distance * voxel, rec.polish_iters)
+        return point_to_plane_icp(target_map, frame.polish, coarse.T_target_source, 2.0 * voxel,
+                                  self.config.refine_iters)
+
     def _polish_voxel(self) -> float:
         return self._voxel if self._voxel > 0 else self._scale / 100.0
 
@@ -466,28 +502,29 @@ class ScanAligner:
         return self.config.inlier_distance * self._polish_voxel()
 
     def _judge(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, T_cem: np.ndarray,
-               polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float,
-               agreement_scale: float = 1.0) -> Estimate:
+               polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float) -> Estimate:
         """Signals of one registration, its failures, degeneracy and covariance."""
         cfg = self.config.health
         T_final = polish.T_target_source
         conditioning = Conditioning.of(polish.hessian, frame.length)
         fitness = target_map.inlier_fraction(frame.polish, T_final, self._inlier_distance())
         metres, radians = disagreement(T_cem, T_final)
-        signals = Signals(fitness, metres / agreement_scale, radians / agreement_scale, conditioning.ratio, spread_m)
-        failures = self._health.failures(signals, use_spread=not recovered)
+        signals = Signals(fitness, metres, radians, conditioning.ratio, spread_m)
+        failures = self._health.failures(signals, recovery=recovered)
         if polish.n_pairs < 10:
             failures.append(f"only {polish.n_pairs} point-to-plane pairs")
         notes = []
         if self._health.degenerate(signals):
             notes.append(f"degenerate (conditioning {conditioning.ratio:.4f}): the motion prediction kept along "
                          "the unconstrained direction")
-            if not failures:
+            # The replacement is linear in the difference: a guess degrees away (a recovery's) would be meaningless.
+            if not failures and disagreement(T_predicted, T_final)[1] < LINEAR_LIMIT:
                 T_final = keep_prediction_along(conditioning.degenerate_basis(cfg.min_conditioning),
                                                 conditioning.length, T_predicted, T_final)
         covariance = covariance_from_hessian(conditioning, polish.residual_variance, prediction_std ** 2,
                                              cfg.min_conditioning)
-        return Estimate(T_final, covariance, signals, failures, notes, recovered)
+        return Estimate(T_final, covariance, signals, failures, notes, recovered,
+                        conditioning.degenerate_basis(cfg.min_conditioning), conditioning.length)
 
     def _held(self, stamp_ns: int, start: float, frame: Frame, reason: str) -> AlignmentStep:
         return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 0.0, False,

@@ -78,16 +78,21 @@ class HealthMonitor:
     def reset(self) -> None:
         self.level = None
 
-    def failures(self, signals: Signals, use_spread: bool = True) -> list[str]:
-        """Why this step cannot be vouched for (empty: it can). Degeneracy is not a failure: see degenerate()."""
+    def failures(self, signals: Signals, recovery: bool = False) -> list[str]:
+        """Why this step cannot be vouched for (empty: it can). Degeneracy is not a failure: see degenerate().
+
+        A global search's answer is judged without agreement and spread (its polish starts from a coarse
+        hypothesis, degrees off); its own check is the ambiguity between distinct hypotheses.
+        """
         c, s, out = self.config, signals, []
         if s.fitness < c.min_fitness:
             out.append(f"low fitness {s.fitness:.3f} < {c.min_fitness:.3f}")
         elif self.level is not None and s.fitness < c.fitness_drop * self.level:
             out.append(f"fitness {s.fitness:.3f} fell below {c.fitness_drop:.2f} x its running level {self.level:.3f}")
-        if s.disagreement_m > c.max_disagreement_translation or s.disagreement_rad > c.max_disagreement_rotation:
+        if not recovery and (s.disagreement_m > c.max_disagreement_translation
+                             or s.disagreement_rad > c.max_disagreement_rotation):
             out.append(f"polish and CEM disagree by {s.disagreement_m:.3f} m, {np.degrees(s.disagreement_rad):.2f} deg")
-        if use_spread and s.spread_m > c.max_spread_translation:
+        if not recovery and s.spread_m > c.max_spread_translation:
             out.append(f"CEM spread {s.spread_m:.3f} m did not converge")
         return out
 

@@ -25,7 +25,6 @@ CHUNKS_PER_THREAD = 4  # partial sums per thread, handed out dynamically: balanc
 N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs
 UPPER = np.triu_indices(6)  # the kernel's order of the J^T W J entries
 DAMPING = 1e-12  # relative to trace(H): keeps the solve defined along an exactly degenerate direction
-PlaneTarget = VoxelMap  # transitional: the old target's name, still imported by test/test_pipeline.py; drop with it
 
 
 @dataclass

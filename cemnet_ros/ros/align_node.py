@@ -66,7 +66,7 @@ _CEM = _DEFAULTS.registration.cem
 
 # name: (default, description, range or None). Types follow the defaults.
 PARAMETERS = {
-    "mode": ("sequential", "'sequential' (scan to previous scan) or 'pair' (source to target topic)", None),
+    "mode": ("sequential", "'sequential' (scan-to-map odometry) or 'pair' (source to target topic)", None),
     "input_topic": ("points", "PointCloud2 input of sequential mode", None),
     "source_topic": ("source", "PointCloud2 source of pair mode", None),
     "target_topic": ("target", "PointCloud2 target of pair mode (subscribed TRANSIENT_LOCAL by default)", None),
