@@ -171,7 +171,7 @@ def test_params_file_lists_every_parameter_and_loads(context):
                                                                        params["n_candidates"])
         assert node._config.registration.weights is None and node._config.voxel_size == params["voxel_size"]
         result = node.set_parameters([Parameter("n_points", value=100)])[0]  # read-only after start-up
-        assert not result.successful and node.get_parameter("n_points").value == 768
+        assert not result.successful and node.get_parameter("n_points").value == params["n_points"]
     finally:
         node.destroy_node()
 

@@ -48,8 +48,12 @@ POLISH_FRACTION = 0.8  # recovery: hypotheses whose CEM fitness is this close to
 
 
 def odometry_registration() -> RegistrationConfig:
-    """CEM settings for tracking around a motion prediction: a short search (the recovery is the wide one)."""
-    return RegistrationConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0))
+    """CEM settings for tracking around a motion prediction: a short search (the recovery is the wide one).
+
+    512 points and a lattice of epsilon / 2 suffice there: the polish against the map gives the precision.
+    """
+    return RegistrationConfig(n_points=512, cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0,
+                                                          lattice_spacing=0.5))
 
 
 class ScanRejected(ValueError):
@@ -97,7 +101,7 @@ class AlignerConfig:
     map_voxel_factor: float = 3.0  # map voxel = this x the frame voxel
     map_points_per_voxel: int = 10
     refine_iters: int = 10  # point-to-plane polish iterations (at most)
-    refine_points: int = 5000  # source points the polish uses at most (a seeded subset of the voxel cloud)
+    refine_points: int = 3000  # source points the polish uses at most (a seeded subset of the voxel cloud)
     inlier_distance: float = 2.0  # in frame voxels: a point with a map point this close counts for the fitness
     cem_radius: float = 1.5  # in units of scale: the CEM's clouds keep points this close to the sensor
 
