@@ -3,25 +3,13 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from script_loader import load_script
 
-REPO = Path(__file__).resolve().parents[1]
-
-
-def _load():
-    spec = importlib.util.spec_from_file_location("bench_robustness", REPO / "scripts" / "bench_robustness.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("bench_robustness", module)  # dataclasses look their module up while being built
-    spec.loader.exec_module(module)
-    return module
-
-
-br = _load()
+br = load_script("bench_robustness")
 
 
 def _pose(x=0.0, y=0.0, z=0.0, yaw_deg=0.0):

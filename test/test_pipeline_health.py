@@ -42,23 +42,24 @@ def test_spread_is_clipped():
 # -- failure signals ------------------------------------------------------------------------------------------
 def test_each_failure_signal_flags_on_its_own():
     monitor = HealthMonitor(HealthConfig())
-    assert monitor.failures(GOOD) == [] and not monitor.degenerate(GOOD)
-    assert "low fitness" in monitor.failures(with_(fitness=0.1))[0]
-    assert "disagree" in monitor.failures(with_(disagreement_m=2.0))[0]
-    assert "disagree" in monitor.failures(with_(disagreement_rad=0.2))[0]
-    assert "spread" in monitor.failures(with_(spread_m=5.0))[0]
-    assert monitor.failures(with_(spread_m=5.0, disagreement_m=2.0), recovery=True) == []
-    assert monitor.degenerate(with_(conditioning=0.001)) and monitor.failures(with_(conditioning=0.001)) == []
+    assert monitor.failures(GOOD, 1.0) == [] and not monitor.degenerate(GOOD)
+    assert "low fitness" in monitor.failures(with_(fitness=0.1), 1.0)[0]
+    assert "disagree" in monitor.failures(with_(disagreement_m=2.0), 1.0)[0]
+    assert monitor.failures(with_(disagreement_m=2.0), 10.0) == []  # within 0.4 resolutions of 10 m
+    assert "disagree" in monitor.failures(with_(disagreement_rad=0.2), 1.0)[0]
+    assert "spread" in monitor.failures(with_(spread_m=5.0), 1.0)[0]
+    assert monitor.failures(with_(spread_m=5.0, disagreement_m=2.0), 1.0, recovery=True) == []
+    assert monitor.degenerate(with_(conditioning=0.001)) and monitor.failures(with_(conditioning=0.001), 1.0) == []
 
 
 def test_fitness_is_judged_against_its_running_level():
     monitor = HealthMonitor(HealthConfig(min_fitness=0.2, fitness_drop=0.7, level_memory=0.5))
-    assert monitor.failures(with_(fitness=0.4)) == []  # no level yet: the absolute floor only
+    assert monitor.failures(with_(fitness=0.4), 1.0) == []  # no level yet: the absolute floor only
     for _ in range(20):
         monitor.accept(0.9)
     assert monitor.level == pytest.approx(0.9)
-    assert "running level" in monitor.failures(with_(fitness=0.5))[0]
-    assert monitor.failures(with_(fitness=0.7)) == []
+    assert "running level" in monitor.failures(with_(fitness=0.5), 1.0)[0]
+    assert monitor.failures(with_(fitness=0.7), 1.0) == []
     monitor.reset()
     assert monitor.level is None
 

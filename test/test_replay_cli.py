@@ -6,10 +6,8 @@ skip them during development. They need no ../shared: the bags are committed in 
 """
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +16,7 @@ import pytest
 from cemnet_ros.data import scenes
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
+from script_loader import load_script
 from cemnet_ros.pipeline.params import aligner_config_from_params as build_config
 from cemnet_ros.tools.replay_cli import load_params, main
 
@@ -28,11 +27,7 @@ SLOW = pytest.mark.skipif(os.environ.get("CEMNET_FAST_TESTS") == "1",
 
 
 def _make_bags_module():
-    spec = importlib.util.spec_from_file_location("make_bags", REPO / "scripts" / "make_bags.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("make_bags", module)  # dataclasses look their module up while being built
-    spec.loader.exec_module(module)
-    return module
+    return load_script("make_bags")
 
 
 @pytest.fixture(scope="module")

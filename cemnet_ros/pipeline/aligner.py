@@ -67,7 +67,7 @@ class RecoveryConfig:
     search: GlobalSearchConfig = field(default_factory=GlobalSearchConfig)
     recovery_radius: float = 10.0  # m: translation disc searched around the prediction
     recovery_points: int = 1024  # source and map points the global search scores
-    recovery_gap: float = 0.5  # s: a stamp gap longer than this triggers a recovery
+    recovery_gap: float = 1.0  # s: a stamp gap longer than this triggers a recovery (a recovery itself takes ~0.5 s)
     ambiguity_ratio: float = 0.9  # a distinct hypothesis this close in fitness makes the answer ambiguous
     polish_distance: float = 6.0  # in frame voxels: the first pairing distance of a hypothesis' polish
     polish_iters: int = 30  # its iterations at that distance (a hypothesis can be degrees off)
@@ -425,7 +425,7 @@ class ScanAligner:
         if metres > 3.0 * translation or radians > 3.0 * rotation:  # the motion model was wrong: look wider
             polish = self._wide_polish(frame, target_map, polish.T_target_source)
         metres, radians = disagreement(T_cem, polish.T_target_source)
-        if metres > cfg.health.max_disagreement_translation or radians > cfg.health.max_disagreement_rotation:
+        if self._health.disagree(metres, radians, self._resolution()):
             T_cem, spread_m = self._cem(clouds, to_units, from_units, polish.T_target_source, sigma)
         return self._judge(frame, target_map, T_predicted, T_cem, polish, spread_m, recovered=False,
                            prediction_std=translation)
@@ -499,6 +499,10 @@ class ScanAligner:
         return point_to_plane_icp(target_map, frame.polish, coarse.T_target_source, 2.0 * voxel,
                                   self.config.refine_iters)
 
+    def _resolution(self) -> float:
+        """Metres the CEM's max-consensus reward can tell apart: epsilon * scale."""
+        return self.config.registration.cem.epsilon * self._scale
+
     def _polish_voxel(self) -> float:
         return self._voxel if self._voxel > 0 else self._scale / 100.0
 
@@ -514,7 +518,7 @@ class ScanAligner:
         fitness = target_map.inlier_fraction(frame.polish, T_final, self._inlier_distance())
         metres, radians = disagreement(T_cem, T_final)
         signals = Signals(fitness, metres, radians, conditioning.ratio, spread_m)
-        failures = self._health.failures(signals, recovery=recovered)
+        failures = self._health.failures(signals, self._resolution(), recovery=recovered)
         if polish.n_pairs < 10:
             failures.append(f"only {polish.n_pairs} point-to-plane pairs")
         notes = []

@@ -29,10 +29,12 @@ class HealthConfig:
     min_fitness: float = 0.3  # absolute floor on the inlier fraction after the polish
     fitness_drop: float = 0.7  # flag when the fitness falls below this fraction of its running level
     level_memory: float = 0.9  # running level: level <- memory * level + (1 - memory) * fitness
-    max_disagreement_translation: float = 0.5  # m: polish vs CEM
+    # Translation limits are in units of the CEM's resolution, epsilon * scale (2.6 m on a KITTI scan, 14 cm
+    # on an RGB-D frame): what the max-consensus reward can tell apart.
+    max_disagreement_translation: float = 0.4  # polish vs CEM
     max_disagreement_rotation: float = 0.05  # rad
     min_conditioning: float = 0.005  # lambda_min / lambda_max of the normalised Hessian; below: degenerate
-    max_spread_translation: float = 1.0  # m: the CEM's final spread (largest translation component)
+    max_spread_translation: float = 0.4  # the CEM's final spread (largest translation component)
     covariance_inflation: float = 100.0  # variance factor of a failed step
 
     def __post_init__(self) -> None:
@@ -78,8 +80,15 @@ class HealthMonitor:
     def reset(self) -> None:
         self.level = None
 
-    def failures(self, signals: Signals, recovery: bool = False) -> list[str]:
+    def disagree(self, metres: float, radians: float, resolution_m: float) -> bool:
+        """Whether polish and CEM answers this far apart cannot both be right."""
+        c = self.config
+        return metres > c.max_disagreement_translation * resolution_m or radians > c.max_disagreement_rotation
+
+    def failures(self, signals: Signals, resolution_m: float, recovery: bool = False) -> list[str]:
         """Why this step cannot be vouched for (empty: it can). Degeneracy is not a failure: see degenerate().
+
+        ``resolution_m`` is the CEM's resolution epsilon * scale, the unit of the translation limits.
 
         A global search's answer is judged without agreement and spread (its polish starts from a coarse
         hypothesis, degrees off); its own check is the ambiguity between distinct hypotheses.
@@ -89,10 +98,9 @@ class HealthMonitor:
             out.append(f"low fitness {s.fitness:.3f} < {c.min_fitness:.3f}")
         elif self.level is not None and s.fitness < c.fitness_drop * self.level:
             out.append(f"fitness {s.fitness:.3f} fell below {c.fitness_drop:.2f} x its running level {self.level:.3f}")
-        if not recovery and (s.disagreement_m > c.max_disagreement_translation
-                             or s.disagreement_rad > c.max_disagreement_rotation):
+        if not recovery and self.disagree(s.disagreement_m, s.disagreement_rad, resolution_m):
             out.append(f"polish and CEM disagree by {s.disagreement_m:.3f} m, {np.degrees(s.disagreement_rad):.2f} deg")
-        if not recovery and s.spread_m > c.max_spread_translation:
+        if not recovery and s.spread_m > c.max_spread_translation * resolution_m:
             out.append(f"CEM spread {s.spread_m:.3f} m did not converge")
         return out
 

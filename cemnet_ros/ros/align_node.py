@@ -347,17 +347,18 @@ class AlignNode(Node):
 
     # -- service and diagnostics ---------------------------------------------------------------------------
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        self._reset_requested.set()
-        response.success = True
-        response.message = "reset: the next scan starts a new trajectory at the identity pose"
-        self.get_logger().info("reset requested")
-        return response
+        return self._request(self._reset_requested, response,
+                             "reset: the next scan starts a new trajectory at the identity pose")
 
     def _on_relocalize(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        self._relocalize_requested.set()
-        response.success = True
-        response.message = "relocalize: the next scan runs the global search against the local map"
-        self.get_logger().info("relocalization requested")
+        return self._request(self._relocalize_requested, response,
+                             "relocalize: the next scan runs the global search against the local map")
+
+    def _request(self, event: threading.Event, response: Trigger.Response, message: str) -> Trigger.Response:
+        """A service's request, carried out by the worker before its next scan."""
+        event.set()
+        response.success, response.message = True, message
+        self.get_logger().info(message)
         return response
 
     def _publish_diagnostics(self) -> None:
@@ -385,6 +386,7 @@ class AlignNode(Node):
             "last_accepted": "" if step is None else step.accepted,
             "last_reason": "" if step is None else step.reason,
             "last_recovered": "" if step is None else step.recovered,
+            "last_recovery_reason": "" if step is None else step.recovery_reason,
             "last_degenerate": "" if step is None else step.degenerate,
             "recoveries": self._recoveries,
             "flagged_steps": flagged, "rejected_inputs": total_rejected,

@@ -94,7 +94,9 @@ def run_replay(reader: BagReader, aligner, out_bag: Path, limit: Optional[int], 
             result.poses.append(step.pose)
             result.steps.append({"index": i, "stamp_ns": step.stamp_ns, "fitness": step.fitness,
                                  "accepted": step.accepted, "reason": step.reason, "latency_s": step.latency_s,
-                                 "n_points": step.n_points, "first": step.relative is None})
+                                 "n_points": step.n_points, "first": step.relative is None,
+                                 "recovered": step.recovered, "recovery_reason": step.recovery_reason,
+                                 "degenerate": step.degenerate, "signals": step.signals})
             bar.update()
     result.wall_s = time.perf_counter() - start
     return result
