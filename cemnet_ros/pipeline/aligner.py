@@ -52,7 +52,7 @@ def odometry_registration() -> RegistrationConfig:
 
     512 points and a lattice of epsilon / 2 suffice there: the polish against the map gives the precision.
     """
-    return RegistrationConfig(n_points=512, cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0,
+    return RegistrationConfig(n_points=512, cem=CEMConfig(n_candidates=100, n_iters=2, n_fused_iters=0,
                                                           lattice_spacing=0.5))
 
 
