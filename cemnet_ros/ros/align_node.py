@@ -110,8 +110,8 @@ PARAMETERS = {
                         "prediction; yaw is searched over the full circle", _float_range(0.0, 1000.0)),
     "recovery_gap": (_DEFAULTS.recovery.recovery_gap, "a stamp gap longer than this (s) triggers the global search",
                      _float_range(1e-3, 3600.0)),
-    "time_budget_s": (_DEFAULTS.recovery.search.time_budget_s, "global search: time budget of its coarse scatter "
-                      "(s; half of it at most)", _float_range(0.01, 60.0)),
+    "time_budget_s": (_DEFAULTS.recovery.search.time_budget_s, "global search: time budget (s) of its coarse "
+                      "scoring (the scatter stops at 50 %, the resampling at 75 % of it)", _float_range(0.01, 60.0)),
     "weights": ("", "sampling network weights (.npz, or an official .pth with allow_pickle); '' = package weights",
                 None),
     "allow_pickle": (False, "allow loading pickled (.pth) weights: only for files you trust", None),
