@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import fields
 from typing import Any
 
-from .aligner import AlignerConfig
+from .config import AlignerConfig
 
 
 def aligner_config_from_params(params: dict[str, Any]) -> AlignerConfig:
