@@ -50,6 +50,14 @@ def matrix_to_euler_np(rotation: np.ndarray) -> np.ndarray:
     return matrix_to_euler(torch.as_tensor(np.asarray(rotation, dtype=np.float64))).numpy()
 
 
+def action_to_matrix_np(action: np.ndarray) -> np.ndarray:
+    """(6,) action [z, y, x, tx, ty, tz] -> 4x4 homogeneous transform (inverse of :func:`matrix_to_action_np`)."""
+    out = np.eye(4)
+    out[:3, :3] = euler_to_matrix_np(np.asarray(action, dtype=np.float64)[:3])
+    out[:3, 3] = action[3:]
+    return out
+
+
 def matrix_to_action_np(transform: np.ndarray) -> np.ndarray:
     """4x4 homogeneous transform -> (6,) action [z, y, x, tx, ty, tz]."""
     transform = np.asarray(transform, dtype=np.float64)
@@ -79,8 +87,7 @@ def procrustes(source: torch.Tensor, target: torch.Tensor, weights: torch.Tensor
 
 def rotation_angle_deg(rotation_a: np.ndarray, rotation_b: np.ndarray) -> float:
     """Geodesic angle (degrees) between two rotation matrices."""
-    cos = (np.trace(np.asarray(rotation_a).T @ np.asarray(rotation_b)) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    return float(np.degrees(rotation_angle_rad(np.asarray(rotation_a).T @ np.asarray(rotation_b))))
 
 
 def rotation_angle_rad(rotation: np.ndarray) -> float:

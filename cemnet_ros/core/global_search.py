@@ -28,7 +28,7 @@ import torch
 
 from .config import CEMConfig
 from .engine import CEMNet
-from .geometry import euler_to_matrix_np
+from .geometry import action_to_matrix_np
 from .scoring import CandidateScorer
 
 SCATTER_CHUNK = 500  # candidates scored between two looks at the clock
@@ -103,22 +103,15 @@ def distinct_best(actions: np.ndarray, cost: np.ndarray, config: GlobalSearchCon
 
 def _score_within(scorer: CandidateScorer, actions: np.ndarray, deadline: float) -> tuple[np.ndarray, np.ndarray]:
     """Fused costs of ``actions`` in chunks until ``deadline`` (perf_counter; one chunk at least); scored ones."""
-    costs: list[np.ndarray] = []
     if len(actions) == 0:
         return actions, np.zeros(0)
+    costs: list[np.ndarray] = []
     for chunk in np.array_split(actions, max(1, len(actions) // SCATTER_CHUNK)):
         costs.append(scorer.cost(torch.from_numpy(chunk)[None], fused=True)[0].numpy())
         if time.perf_counter() > deadline:
             break
-    cost = np.concatenate(costs) if costs else np.zeros(0)
+    cost = np.concatenate(costs)
     return actions[:len(cost)], cost
-
-
-def action_to_transform(action: np.ndarray) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, :3] = euler_to_matrix_np(action[:3])
-    out[:3, 3] = action[3:]
-    return out
 
 
 def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, radius: float,
@@ -152,5 +145,5 @@ def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, ra
                  generator=torch.Generator().manual_seed(seed))
     mu, sigma, fitness = out.mu.double().numpy(), out.sigma.double().numpy(), out.fitness.double().numpy()
     order = np.argsort(-fitness)
-    return [Hypothesis(action_to_transform(mu[i]), float(fitness[i]), sigma[i]) for i in order]
+    return [Hypothesis(action_to_matrix_np(mu[i]), float(fitness[i]), sigma[i]) for i in order]
 
