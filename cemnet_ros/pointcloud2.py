@@ -11,13 +11,17 @@ from __future__ import annotations
 
 import array
 from dataclasses import dataclass
-from typing import Any, List, Tuple
+from typing import Any, List, Optional, Tuple
 
 import numpy as np
+
+from cemnet_ros.pipeline.deskew import TIME_FIELDS, TimeFieldError, normalize_point_times
 
 # sensor_msgs/PointField datatype constants.
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
 _FLOAT_TYPES = {FLOAT32: "f4", FLOAT64: "f8"}
+_NUMPY_TYPES = {INT8: "i1", UINT8: "u1", INT16: "i2", UINT16: "u2", INT32: "i4", UINT32: "u4", FLOAT32: "f4",
+                FLOAT64: "f8"}
 _TYPE_NAMES = {INT8: "INT8", UINT8: "UINT8", INT16: "INT16", UINT16: "UINT16", INT32: "INT32", UINT32: "UINT32",
                FLOAT32: "FLOAT32", FLOAT64: "FLOAT64"}
 _SIZES = {INT8: 1, UINT8: 1, INT16: 2, UINT16: 2, INT32: 4, UINT32: 4, FLOAT32: 4, FLOAT64: 8}
@@ -27,7 +31,7 @@ class CloudError(ValueError):
     """A PointCloud2 that cannot be decoded; the message says why, ``kind`` names the problem for counters.
 
     Kinds: ``empty``, ``missing_field``, ``field_type``, ``layout`` (point_step/row_step too small),
-    ``truncated`` and ``no_finite``.
+    ``truncated``, ``no_finite`` and, from :func:`decode_point_times` only, ``time_field``.
     """
 
     def __init__(self, kind: str, message: str) -> None:
@@ -70,6 +74,17 @@ def decode_xyz(msg: Any) -> Tuple[np.ndarray, CloudReport]:
     non-float x/y/z, a point_step or row_step too small for its fields, data shorter than row_step * height, or
     no finite point at all.
     """
+    points, _ = _xyz_rows(msg)
+    finite = np.isfinite(points).all(axis=1)
+    n_valid = int(finite.sum())
+    report = CloudReport(n_total=len(points), n_valid=n_valid, n_nonfinite=len(points) - n_valid)
+    if n_valid == 0:
+        raise CloudError("no_finite", f"cloud has no finite point ({report.n_total} non-finite)")
+    return (points if n_valid == len(points) else points[finite]), report
+
+
+def _xyz_rows(msg: Any) -> Tuple[np.ndarray, np.ndarray]:
+    """Every row's x, y, z (finite or not) as (height * width, 3) float64, and the data as uint8; validated."""
     height, width = int(msg.height), int(msg.width)
     point_step, row_step = int(msg.point_step), int(msg.row_step)
     if height <= 0 or width <= 0:
@@ -102,12 +117,42 @@ def decode_xyz(msg: Any) -> Tuple[np.ndarray, CloudReport]:
     for axis, (offset, dtype) in enumerate(layout):
         view = np.ndarray((height, width), dtype=dtype, buffer=buf, offset=offset, strides=(row_step, point_step))
         points[:, axis] = view.reshape(-1)
+    return points, buf
+
+
+def decode_point_times(msg: Any, stamp_ns: Optional[int] = None) -> Optional[np.ndarray]:
+    """Per-point times of a PointCloud2 as float64 seconds relative to its stamp, or None without a time field.
+
+    Aligned with :func:`decode_xyz`'s points (the same rows with non-finite x, y or z dropped). The field is the
+    first of ``t``, ``time``, ``offset_time``, ``timestamp`` present (:data:`~cemnet_ros.pipeline.deskew.TIME_FIELDS`);
+    its unit is read as :func:`~cemnet_ros.pipeline.deskew.normalize_point_times` documents (integers: ns
+    relative to the stamp; floats: s relative, absolute s, absolute ns). ``stamp_ns`` defaults to the header's.
+    Raises :class:`CloudError` as :func:`decode_xyz` does, and kind ``time_field`` when the field cannot be read
+    or fits no time convention (the caller may then go on without deskewing).
+    """
+    fields = {f.name: f for f in msg.fields}
+    name = next((n for n in TIME_FIELDS if n in fields), None)
+    if name is None:
+        return None
+    f = fields[name]
+    if f.datatype not in _NUMPY_TYPES:
+        raise CloudError("time_field", f"time field {name} has unknown datatype {f.datatype}")
+    points, buf = _xyz_rows(msg)
+    point_step, row_step = int(msg.point_step), int(msg.row_step)
+    if int(f.offset) < 0 or int(f.offset) + _SIZES[f.datatype] > point_step:
+        raise CloudError("time_field", f"point_step {point_step} is too small for time field {name} at offset "
+                                       f"{f.offset} ({_SIZES[f.datatype]} bytes)")
+    height, width = int(msg.height), int(msg.width)
+    dtype = np.dtype((">" if msg.is_bigendian else "<") + _NUMPY_TYPES[f.datatype])
+    raw = np.ndarray((height, width), dtype=dtype, buffer=buf, offset=int(f.offset),
+                     strides=(row_step, point_step)).reshape(-1)
     finite = np.isfinite(points).all(axis=1)
-    n_valid = int(finite.sum())
-    report = CloudReport(n_total=height * width, n_valid=n_valid, n_nonfinite=height * width - n_valid)
-    if n_valid == 0:
-        raise CloudError("no_finite", f"cloud has no finite point ({report.n_total} non-finite)")
-    return (points if n_valid == len(points) else points[finite]), report
+    if stamp_ns is None:
+        stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+    try:
+        return normalize_point_times(raw[finite], stamp_ns, name)
+    except TimeFieldError as exc:
+        raise CloudError("time_field", str(exc)) from exc
 
 
 def encode_xyz(points: np.ndarray) -> EncodedCloud:

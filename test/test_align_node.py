@@ -27,14 +27,16 @@ from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from cemnet_ros.pointcloud2 import decode_xyz, make_pointcloud2  # noqa: E402
-from cemnet_ros.ros.align_node import PARAMETERS, AlignNode  # noqa: E402
+from cemnet_ros.ros.align_node import TFMessage, AlignNode  # noqa: E402
+from cemnet_ros.ros.node_config import node_parameters, params_file_text  # noqa: E402
 from street_scene import make_transform, make_world  # noqa: E402
 
 pytestmark = pytest.mark.dds
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = sorted((REPO / "bags").glob("*.mcap"))
-FAST = {"n_candidates": 300, "n_iters": 6, "qos_reliability": "reliable", "queue_size": 10}
+FAST = {"registration.cem.n_candidates": 300, "registration.cem.n_iters": 6, "qos_reliability": "reliable",
+        "queue_size": 10, "publish_aligned_cloud": True}
 FIRST_TIMEOUT = 120.0  # the first registration JIT-compiles the numba kernels on a cold cache
 
 
@@ -86,13 +88,15 @@ class Harness:
         params = [Parameter(k, value=v) for k, v in {**FAST, **overrides}.items()]
         self.node = AlignNode(context=context, namespace=namespace, parameter_overrides=params)
         self.probe = rclpy.create_node("probe", namespace=namespace, context=context)
-        self.odometry, self.poses, self.clouds, self.diagnostics, self.logs = [], [], [], [], []
+        self.odometry, self.poses, self.clouds, self.diagnostics, self.logs, self.tfs = [], [], [], [], [], []
         ns = f"/{namespace}/align_node"
         self.probe.create_subscription(Odometry, f"{ns}/odometry", self.odometry.append, 50)
         self.probe.create_subscription(PoseStamped, f"{ns}/pose", self.poses.append, 50)
         self.probe.create_subscription(PointCloud2, f"{ns}/aligned_cloud", self.clouds.append, 50)
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
         self.probe.create_subscription(Log, "/rosout", self._on_log, 100)
+        if TFMessage is not None:
+            self.probe.create_subscription(TFMessage, "/tf", self.tfs.append, 100)
         self.pubs = {t: self.probe.create_publisher(PointCloud2, f"/{namespace}/{t}", 10) for t in input_topics}
         if target_latched is not None:
             qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -158,20 +162,26 @@ def harness_factory(context, request):
 
 
 # ------------------------------------------------------------------------------------------------------------
-def test_params_file_lists_every_parameter_and_loads(context):
+def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_node(context, tmp_path):
     path = REPO / "config" / "align_node.yaml"
-    params = yaml.safe_load(path.read_text())["align_node"]["ros__parameters"]
-    assert set(params) == set(PARAMETERS)
-    assert all(params[name] == default for name, (default, _, _) in PARAMETERS.items())
-    node = AlignNode(context=context, cli_args=["--ros-args", "--params-file", str(path), "-p", "n_iters:=7"])
+    assert path.read_text() == params_file_text(), "regenerate: python -m cemnet_ros.ros.node_config"
+    params = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
+    schema = node_parameters()
+    assert set(params) == set(schema)
+    assert all(params[n] == (list(p.default) if p.kind is tuple else p.default) for n, p in schema.items())
+    changed = tmp_path / "robot.yaml"
+    changed.write_text("/**:\n  ros__parameters:\n    registration.cem.n_iters: 7\n    base_frame: robot1/base\n")
+    node = AlignNode(context=context, cli_args=["--ros-args", "-r", "__ns:=/robot1", "-r", "__node:=lidar_odom",
+                                                "--params-file", str(path), "--params-file", str(changed)])
     try:
-        assert node.get_parameter("n_iters").value == 7 and node.get_parameter("mode").value == "sequential"
-        cem = node._config.registration.cem  # the parameters reach the pipeline's config
-        assert (cem.n_iters, cem.n_fused_iters, cem.n_candidates) == (7, min(params["n_fused_iters"], 7),
-                                                                       params["n_candidates"])
-        assert node._config.registration.weights is None and node._config.voxel_size == params["voxel_size"]
-        result = node.set_parameters([Parameter("n_points", value=100)])[0]  # read-only after start-up
-        assert not result.successful and node.get_parameter("n_points").value == params["n_points"]
+        assert node.get_fully_qualified_name() == "/robot1/lidar_odom"
+        assert node.get_parameter("registration.cem.n_iters").value == 7
+        assert node.get_parameter("mode").value == "sequential"
+        cem = node._pipeline_config.registration.cem  # the parameters reach the pipeline's config
+        assert (cem.n_iters, cem.n_candidates) == (7, params["registration.cem.n_candidates"])
+        assert node._cfg.base_frame == "robot1/base"
+        result = node.set_parameters([Parameter("registration.n_points", value=100)])[0]  # read-only
+        assert not result.successful
     finally:
         node.destroy_node()
 
@@ -179,8 +189,8 @@ def test_params_file_lists_every_parameter_and_loads(context):
 def test_bad_parameter_values_are_refused(context):
     with pytest.raises(ValueError, match="mode"):
         AlignNode(context=context, parameter_overrides=[Parameter("mode", value="bogus")])
-    with pytest.raises(Exception, match="n_points"):
-        AlignNode(context=context, parameter_overrides=[Parameter("n_points", value=3)])
+    with pytest.raises(Exception, match="registration.n_points"):  # rclpy refuses it against the range
+        AlignNode(context=context, parameter_overrides=[Parameter("registration.n_points", value=3)])
 
 
 def test_sequential_odometry_follows_the_ground_truth(harness_factory):
@@ -202,12 +212,21 @@ def test_sequential_odometry_follows_the_ground_truth(harness_factory):
     assert wait_for(lambda: len(h.poses) == len(POSES) and len(h.clouds) == len(POSES), 10)
     cloud = h.clouds[-1]
     assert cloud.header.frame_id == "odom" and cloud.width == 12000
+    assert [f.name for f in cloud.fields] == [f.name for f in scan_msg(0).fields]  # every field kept
     aligned = decode_xyz(cloud)[0]
     seen = (WORLD - POSES[-1][:3, 3]) @ POSES[-1][:3, :3] @ POSES[-1][:3, :3].T + POSES[-1][:3, 3]
     assert np.abs(np.median(aligned, 0) - np.median(seen, 0)).max() < 0.5
     assert wait_for(lambda: h.values().get("processed") == str(len(POSES)), 5), h.values()
     values = h.values()
     assert values["queue_drops"] == "0" and values["rejected_inputs"] == "0" and float(values["last_fitness"]) > 0.3
+    assert values["engine_ready"] == "True" and float(values["input_age_s"]) < 60
+    twist_cov = np.reshape(outputs[0].twist.covariance, (6, 6))
+    assert np.all(np.diag(twist_cov) > 0)  # nothing is published as perfectly known
+    if TFMessage is not None:  # a second node receives odom -> base_link on /tf
+        assert wait_for(lambda: len(h.tfs) >= len(POSES), 10)
+        tf = h.tfs[-1].transforms[0]
+        assert (tf.header.frame_id, tf.child_frame_id) == ("odom", "base_link")
+        assert tf.transform.translation.x == pytest.approx(outputs[-1].pose.pose.position.x)
 
 
 def _bad_clouds():
@@ -243,23 +262,41 @@ def test_bad_inputs_are_counted_warned_and_do_not_stop_valid_scans(harness_facto
     assert wait_for(lambda: any(d.level == d.WARN for d in h.diagnostics), 5)
 
 
-def test_reset_restarts_the_trajectory(harness_factory):
+def test_reset_restarts_the_map_and_keeps_odom_continuous(harness_factory):
     h = harness_factory()
     for k in range(3):
         odom = h.send(scan_msg(k), timeout=FIRST_TIMEOUT)
-    assert np.linalg.norm(pose_of(odom)[:3, 3]) > 0.5
+    before = pose_of(odom)
+    assert np.linalg.norm(before[:3, 3]) > 0.5
     assert h.reset_client.wait_for_service(timeout_sec=5)
     future = h.reset_client.call_async(Trigger.Request())
     assert wait_for(future.done, 10) and future.result().success
     odom = h.send(scan_msg(3))
-    np.testing.assert_allclose(pose_of(odom), np.eye(4), atol=1e-9)
+    np.testing.assert_allclose(pose_of(odom), before, atol=1e-9)  # REP-105: odom does not jump
     odom = h.send(scan_msg(4))
-    trans_err, _ = pose_error(np.linalg.inv(POSES[3]) @ POSES[4], pose_of(odom))
+    trans_err, _ = pose_error(np.linalg.inv(POSES[3]) @ POSES[4], np.linalg.inv(before) @ pose_of(odom))
     assert trans_err < 0.02
 
 
+def test_scans_sent_from_the_start_are_processed_or_reported(harness_factory):
+    """The subscription exists before the engine has loaded; every early scan is queued or counted as dropped."""
+    h = harness_factory({"queue_size": 3})
+    for k in range(len(POSES)):
+        h.pubs["points"].publish(scan_msg(k))
+        time.sleep(0.05)
+    assert wait_for(lambda: h.values().get("engine_ready") == "True" and h.values().get("queue_depth") == "0",
+                    FIRST_TIMEOUT)
+    assert wait_for(lambda: int(h.values().get("processed", 0)) + int(h.values().get("queue_drops", 0))
+                    == len(POSES), 30), h.values()
+    values = h.values()
+    if int(values["queue_drops"]):
+        assert any("dropped" in log.msg and log.level == Log.WARN for log in h.logs)
+    assert len(h.odometry) == int(values["processed"])
+
+
 def test_pair_mode_with_a_latched_target(harness_factory, context):
-    h = harness_factory({"mode": "pair", "pair_tolerance": 0.0, "prior": "identity", "identity_sigma": 0.2},
+    h = harness_factory({"mode": "pair", "pair_tolerance": 0.0, "tracking.prior": "identity",
+                         "tracking.identity_sigma": 0.2},
                         input_topics=("source",), target_latched="target")
     target = scan_msg(0, pose=np.eye(4), frame="map")
     target.header.stamp = Time(sec=0, nanosec=0)  # an old, latched map
@@ -269,6 +306,49 @@ def test_pair_mode_with_a_latched_target(harness_factory, context):
         assert odom.header.frame_id == "map"
         trans_err, rot_err = pose_error(pose, pose_of(odom))
         assert trans_err < 0.02 and rot_err < 0.1, (k, trans_err, rot_err)
+
+
+@pytest.mark.skipif(TFMessage is None, reason="tf2_msgs not importable (./run builds it: scripts/build_tf2_msgs.sh)")
+def test_tf_is_received_by_another_node_and_can_be_inverted(harness_factory):
+    for invert in (False, True):
+        h = harness_factory({"invert_tf": invert})
+        odom = h.send(scan_msg(0), timeout=FIRST_TIMEOUT)
+        odom = h.send(scan_msg(1))
+        assert wait_for(lambda: len(h.tfs) >= 2, 10)
+        tf = h.tfs[-1].transforms[0]
+        T = np.eye(4)
+        q, t = tf.transform.rotation, tf.transform.translation
+        T[:3, :3], T[:3, 3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), [t.x, t.y, t.z]
+        frames = (tf.header.frame_id, tf.child_frame_id)
+        assert frames == (("base_link", "odom") if invert else ("odom", "base_link"))
+        np.testing.assert_allclose(np.linalg.inv(T) if invert else T, pose_of(odom), atol=1e-6)
+
+
+def test_odometry_is_the_base_frames_motion_given_an_extrinsic(harness_factory):
+    """base_to_sensor set: the published pose is T_base_sensor T_sensor0_sensor inv(T_base_sensor)."""
+    from cemnet_ros.pipeline.aligner import ScanAligner
+    from cemnet_ros.pipeline.config import AlignerConfig
+    from cemnet_ros.pipeline.extrinsic import pose_from_xyz_rpy
+    from cemnet_ros.schema import build
+    from rosbags.typesys import Stores, get_typestore
+
+    kitti = REPO / "bags" / "kitti_00_6scans.mcap"
+    if not kitti.is_file():
+        pytest.skip("bags/kitti_00_6scans.mcap missing")
+    clouds, _ = _read_bag(kitti)
+    extrinsic = (0.3, -0.1, 1.7, 0.01, -0.02, 0.5)
+    small_cem = {"registration.cem.n_candidates": 100, "registration.cem.n_iters": 2}
+    h = harness_factory({"base_to_sensor": list(extrinsic), **small_cem})
+    published = [pose_of(h.send(raw, timeout=FIRST_TIMEOUT if k < 2 else 120.0)) for k, (_, raw) in enumerate(clouds)]
+    store = get_typestore(Stores.ROS2_JAZZY)
+    aligner = ScanAligner(build(AlignerConfig(), small_cem))
+    T_bs = pose_from_xyz_rpy(extrinsic)
+    for (ns, raw), T_published in zip(clouds, published):
+        points = decode_xyz(store.deserialize_cdr(raw, "sensor_msgs/msg/PointCloud2"))[0]
+        expected = T_bs @ aligner.process(points, ns).pose @ np.linalg.inv(T_bs)
+        trans_err, rot_err = pose_error(expected, T_published)
+        assert trans_err < 1e-3 and rot_err < 0.01, (trans_err, rot_err)
+    assert np.linalg.norm(published[-1][:3, 3]) > 2.0  # the base moved (KITTI: ~0.8 m a scan)
 
 
 # -- replay of the bundled bags over DDS ---------------------------------------------------------------------
@@ -309,9 +389,10 @@ def test_replay_bag_over_dds(harness_factory, bag):
     from cemnet_ros.replay.trajectory import absolute_trajectory_error
 
     clouds, truth = _read_bag(bag)
-    from cemnet_ros.pipeline.aligner import AlignerConfig
+    from cemnet_ros.pipeline.config import AlignerConfig
     cem = AlignerConfig().registration.cem
-    h = harness_factory({"n_candidates": cem.n_candidates, "n_iters": cem.n_iters})  # the node's default CEM
+    h = harness_factory({"registration.cem.n_candidates": cem.n_candidates,  # the node's default CEM
+                         "registration.cem.n_iters": cem.n_iters})
     estimates, started = [], time.monotonic()
     for k, (ns, raw) in enumerate(clouds):
         odom = h.send(raw, timeout=FIRST_TIMEOUT if k < 2 else 120.0)

@@ -2,8 +2,8 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.core.geometry import (euler_to_matrix, euler_to_matrix_np, matrix_to_action_np, matrix_to_euler,
-                                      procrustes, transform_points)
+from cemnet_ros.core.geometry import euler_to_matrix_np, matrix_to_action_np, matrix_to_euler_np
+from cemnet_ros.core.geometry_torch import euler_to_matrix, matrix_to_euler, procrustes, transform_points
 
 
 def test_euler_convention_matches_scipy_zyx():
@@ -39,3 +39,11 @@ def test_procrustes_recovers_motion_and_never_reflects():
     mirrored = src * torch.tensor([1.0, 1.0, -1.0], dtype=src.dtype)
     r, _ = procrustes(src, mirrored)
     np.testing.assert_allclose(torch.det(r).numpy(), 1.0, atol=1e-9)
+
+
+def test_numpy_twins_match_the_torch_functions():
+    angles = np.random.default_rng(3).uniform(-1.5, 1.5, (20, 3))
+    torch_rot = euler_to_matrix(torch.as_tensor(angles)).numpy()
+    np.testing.assert_allclose(euler_to_matrix_np(angles), torch_rot, atol=1e-12)
+    np.testing.assert_allclose(matrix_to_euler_np(torch_rot), matrix_to_euler(torch.as_tensor(torch_rot)).numpy(),
+                               atol=1e-12)

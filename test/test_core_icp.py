@@ -1,7 +1,7 @@
 import numpy as np
 import torch
 
-from cemnet_ros.core.geometry import euler_to_matrix, transform_points
+from cemnet_ros.core.geometry_torch import euler_to_matrix, transform_points
 from cemnet_ros.core.icp import batch_icp
 from cemnet_ros.core.scoring import refine_with_icp
 

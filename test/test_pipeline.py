@@ -9,7 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cemnet_ros.core import CEMConfig, RegistrationConfig
-from cemnet_ros.pipeline.aligner import AlignerConfig, ScanAligner, ScanRejected
+from cemnet_ros.pipeline.aligner import ScanAligner, ScanRejected
+from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
 from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
 from cemnet_ros.pipeline.preprocess import (crop_range, farthest_point_indices, finite_points, robust_radius,
                                             subsample, voxel_downsample)
@@ -256,11 +257,11 @@ def test_corridor_steps_are_flagged_degenerate_and_their_covariance_grows_along_
 
 def test_config_validation():
     with pytest.raises(ValueError):
-        AlignerConfig(prior="magic")
+        TrackingConfig(prior="magic")
     with pytest.raises(ValueError):
-        AlignerConfig(sampling="magic")
+        PreprocessConfig(sampling="magic")
     with pytest.raises(ValueError):
-        AlignerConfig(min_range=10.0, max_range=5.0)
+        PreprocessConfig(min_range=10.0, max_range=5.0)
 
 
 def test_pair_alignment_recovers_the_relative_pose_from_no_guess():

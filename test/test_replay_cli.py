@@ -17,8 +17,9 @@ from cemnet_ros.data import scenes
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
 from script_loader import load_script
-from cemnet_ros.pipeline.params import aligner_config_from_params as build_config
 from cemnet_ros.tools.replay_cli import load_params, main
+from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
+from cemnet_ros.schema import build
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
@@ -83,7 +84,7 @@ def _summary(out: Path) -> dict:
 
 def test_replay_tiny_bag_small_cem(tiny_bag, tmp_path, capsys):
     out = tmp_path / "out"
-    rc = main([str(tiny_bag), "--out", str(out), "--quiet", "--n-candidates", "200", "--n-iters", "4"])
+    rc = main([str(tiny_bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "200", "--registration.cem.n_iters", "4"])
     assert rc == 0
     report = capsys.readouterr().out
     assert "ATE RMSE" in report and "RPE translation" in report and "latency p50" in report
@@ -125,8 +126,8 @@ def test_replay_without_ground_truth_reports_speed_only(tmp_path, capsys):
         for i in range(3):
             writer.write_cloud("/cloud", base + [0.1 * i, 0, 0], "cam", 10**18 + i * 10**8)
     out = tmp_path / "out"
-    assert main([str(bag), "--out", str(out), "--quiet", "--limit", "2", "--n-candidates", "100",
-                 "--n-iters", "2", "--no-plot"]) == 0
+    assert main([str(bag), "--out", str(out), "--quiet", "--limit", "2", "--registration.cem.n_candidates", "100",
+                 "--registration.cem.n_iters", "2", "--no-plot"]) == 0
     report = capsys.readouterr().out
     assert "speed only" in report and "ATE" not in report
     summary = _summary(out)
@@ -143,7 +144,7 @@ def test_replay_reports_rejected_scans_and_goes_on(tmp_path, capsys):
             cloud = base[:10] if i == 1 else base + [0.1 * i, 0, 0]
             writer.write_cloud("/cloud", cloud, "cam", 10**18 + i * 10**8)
     out = tmp_path / "out"
-    assert main([str(bag), "--out", str(out), "--quiet", "--n-candidates", "100", "--n-iters", "2",
+    assert main([str(bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "100", "--registration.cem.n_iters", "2",
                  "--no-plot"]) == 0
     summary = _summary(out)
     assert summary["scans"] == 3
@@ -155,25 +156,33 @@ def test_replay_reports_rejected_scans_and_goes_on(tmp_path, capsys):
     (["{tmp}/missing.mcap"], "bag not found"),
     (["{bag}", "--topic", "/nope"], "topic /nope not in"),
     (["{bag}", "--gt-topic", "/nope"], "ground-truth topic /nope"),
-    (["{bag}", "--prior", "magic"], "bad configuration"),
-    (["{bag}", "--n-points", "4"], "bad configuration"),
+    (["{bag}", "--registration.n_points", "4"], "bad configuration"),
+    (["{bag}", "--config", "{tmp}/bad.yaml"], "bad configuration"),
 ])
 def test_replay_bad_inputs_exit_2(tiny_bag, tmp_path, capsys, argv, message):
     argv = [a.format(tmp=tmp_path, bag=tiny_bag) for a in argv]
+    (tmp_path / "bad.yaml").write_text("/**:\n  ros__parameters:\n    tracking.prior: magic\n")
     assert main(argv + ["--out", str(tmp_path / "o"), "--quiet"]) == 2
     assert message in capsys.readouterr().err
 
 
+def build_config(values):
+    return build(AlignerConfig(), values, exclude=DERIVED)
+
+
 def test_config_yaml_ros_format_and_overrides(tmp_path):
     cfg_file = tmp_path / "p.yaml"
-    cfg_file.write_text("align_node:\n  ros__parameters:\n    n_candidates: 321\n    n_iters: 2\n    n_fused_iters: 5\n"
-                        "    voxel_size: 0.3\n    prior: identity\n    weights: ''\n    input_topic: points\n")
+    cfg_file.write_text("/**:\n  ros__parameters:\n    registration.cem.n_candidates: 321\n    registration:\n"
+                        "      cem: {n_iters: 2}\n    preprocess.voxel_size: 0.3\n    tracking.prior: identity\n"
+                        "    registration.weights: ''\n    input_topic: points\n")
     config = build_config(load_params(cfg_file))
     assert config.registration.cem.n_candidates == 321 and config.registration.cem.n_iters == 2
-    assert config.registration.cem.n_fused_iters == 2  # clamped as align_node does
-    assert config.voxel_size == 0.3 and config.prior == "identity" and config.registration.weights is None
-    with pytest.raises(ValueError, match="unknown|must"):
-        build_config({"prior": "nonsense"})
+    assert config.preprocess.voxel_size == 0.3 and config.tracking.prior == "identity"
+    assert config.registration.weights == ""
+    with pytest.raises(ValueError, match="tracking.prior must be one of"):
+        build_config({"tracking.prior": "nonsense"})
+    with pytest.raises(ValueError, match="unknown parameter"):
+        build_config({"n_candidates": 5})  # flat names of the old front ends are refused, not ignored
 
 
 def test_repo_node_config_loads():

@@ -15,7 +15,7 @@ import pytest
 import torch
 
 from cemnet_ros.core.checkpoint import load_network
-from cemnet_ros.core.config import CEMConfig
+from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
 from cemnet_ros.tools import train_cli
 from cemnet_ros.train.config import TrainConfig, epoch_learning_rate
@@ -56,7 +56,7 @@ def shapes_npz(tmp_path_factory) -> Path:
 
 
 def tiny_config(data: Path, out: Path, **overrides) -> TrainConfig:
-    cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=0, exploration_weight=0.0, seed=None)
+    cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=0, exploration_weight=0.0, seed=UNSEEDED)
     val_cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=1)
     base = TrainConfig(data=str(data), out_dir=str(out), batch_size=4, lr=1e-3, epochs=1, cem=cem, val_cem=val_cem,
                        protocol=TINY, val_fraction=0.2, threads=1, progress=False, seed=5)

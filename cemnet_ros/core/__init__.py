@@ -1,5 +1,16 @@
-"""The CEMNet engine on numpy arrays and torch tensors. Never imports rclpy."""
+"""The CEMNet engine on numpy arrays and torch tensors. Never imports rclpy.
+
+The configs import without torch (the node declares its parameters before the engine loads); the engine's
+names load torch on first use.
+"""
 from .config import CEMConfig, RegistrationConfig
-from .registration import Registrar, RegistrationResult, register
 
 __all__ = ["CEMConfig", "RegistrationConfig", "Registrar", "RegistrationResult", "register"]
+
+
+def __getattr__(name: str):
+    if name in ("Registrar", "RegistrationResult", "register"):
+        from . import registration
+
+        return getattr(registration, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

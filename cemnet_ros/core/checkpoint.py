@@ -100,9 +100,9 @@ def load_weights(path: str | os.PathLike, allow_pickle: bool = False) -> tuple[d
 
 
 def load_network(path: str | os.PathLike | None = None, allow_pickle: bool = False) -> SamplingNetwork:
-    """A :class:`SamplingNetwork` with weights from ``path``: a file, None (the package's default weights) or
-    ``"official"`` (the official ModelNet40 clean checkpoint, converted, shipped in the package)."""
-    path = DEFAULT_WEIGHTS if path is None else OFFICIAL_WEIGHTS if str(path) == "official" else path
+    """A :class:`SamplingNetwork` with weights from ``path``: a file, None or "" (the package's default weights)
+    or ``"official"`` (the official ModelNet40 clean checkpoint, converted, shipped in the package)."""
+    path = DEFAULT_WEIGHTS if path is None or str(path) == "" else OFFICIAL_WEIGHTS if str(path) == "official" else path
     state, _ = load_weights(path, allow_pickle)
     network = SamplingNetwork()
     try:

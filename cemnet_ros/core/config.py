@@ -1,10 +1,18 @@
-"""Typed configuration of the CEMNet engine, with the paper's defaults."""
+"""Typed configuration of the CEMNet engine, with the paper's defaults (fields documented for the schema)."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional, Tuple
 
+from cemnet_ros.schema import param, section
+
 Six = Tuple[float, float, float, float, float, float]
+UNSEEDED = -1  # a seed field's value for fresh randomness on every run
+
+
+def seed_or_none(seed: int) -> Optional[int]:
+    """A seed field as numpy / torch take it: None for :data:`UNSEEDED`."""
+    return None if seed < 0 else seed
 
 
 @dataclass
@@ -15,25 +23,25 @@ class CEMConfig:
     ``R = Rx(x) @ Ry(y) @ Rz(z)``; a candidate maps source points onto the target: ``y = R x + t``.
     """
 
-    n_candidates: int = 1000  # N
-    n_iters: int = 10  # T
-    n_fused_iters: int = 3  # M: iterations that fuse the "future" (after-ICP) reward
-    icp_steps: int = 3  # ICP steps behind the future reward
-    epsilon: float = 0.1  # truncation of the max-consensus reward
-    alpha: float = 0.5  # weight of the current reward in the fused score
-    # The reference's test-time exploration blend of the sampling network's output: mu0 <- (1-w) mu0,
-    # sigma0 <- (1-w) sigma0 + w * exploration_sigma (0.5 at test time, 0 in training). It widens a confident but
-    # wrong network prior; a prior given by the caller (motion model, identity) is used as it is.
-    exploration_weight: float = 0.5
-    exploration_sigma: Six = (1.0, 1.0, 1.0, 0.5, 0.5, 0.5)
-    # ICP correspondences farther than this (cloud units) are ignored; None = 2 * epsilon.
-    icp_max_distance: Optional[float] = None
-    # Optional point-to-point ICP refinement of mu_T (0 = off = the paper's method).
-    refine_icp_steps: int = 0
-    # CPU look-up lattice spacing in units of epsilon: finer = more often the exact nearest neighbour, coarser =
-    # a smaller lattice (faster to build, fewer cache misses on large scenes).
-    lattice_spacing: float = 0.25
-    seed: Optional[int] = 0
+    n_candidates: int = param(1000, "N: candidates sampled per iteration", low=2)
+    n_iters: int = param(10, "T: iterations", low=1)
+    n_fused_iters: int = param(3, "M: first iterations fusing the after-ICP ('future') reward", low=0)
+    icp_steps: int = param(3, "point-to-point ICP steps behind the future reward", low=0)
+    epsilon: float = param(0.1, "truncation distance of the max-consensus reward (network units)", low=1e-6)
+    alpha: float = param(0.5, "weight of the current reward in the fused score", low=0.0, high=1.0)
+    # The reference's test-time blend of the sampling network's output: mu0 <- (1-w) mu0,
+    # sigma0 <- (1-w) sigma0 + w * exploration_sigma. It widens a confident but wrong network prior; a prior
+    # given by the caller (motion model, identity) is used as it is.
+    exploration_weight: float = param(0.5, "test-time blend of the network's Gaussian towards exploration_sigma "
+                                      "(reference: 0.5; training: 0)", low=0.0, high=1.0)
+    exploration_sigma: Six = param((1.0, 1.0, 1.0, 0.5, 0.5, 0.5), "spread the network's Gaussian is blended "
+                                   "towards (rad, network units)", low=0.0)
+    icp_max_distance: float = param(0.0, "ICP correspondences farther than this are ignored (network units); "
+                                    "0 = 2 epsilon", low=0.0)
+    refine_icp_steps: int = param(0, "point-to-point ICP refinement steps of mu_T (0 = the paper's method)", low=0)
+    lattice_spacing: float = param(0.25, "CPU look-up lattice spacing in units of epsilon: finer = more often the "
+                                   "exact nearest neighbour, coarser = a smaller lattice", low=0.01, high=1.0)
+    seed: int = param(0, "seed of the CEM's sampling; -1 = unseeded", low=-1)
 
     def __post_init__(self) -> None:
         if self.n_candidates < 2:
@@ -50,33 +58,32 @@ class CEMConfig:
             raise ValueError("exploration_weight must lie in [0, 1]")
         if self.icp_steps < 0 or self.refine_icp_steps < 0:
             raise ValueError("ICP step counts must be >= 0")
+        if self.icp_max_distance < 0:
+            raise ValueError("icp_max_distance must be >= 0 (0 = 2 epsilon)")
         if not 0.0 < self.lattice_spacing <= 1.0:
             raise ValueError("lattice_spacing must lie in (0, 1]")
 
     @property
     def icp_radius(self) -> float:
-        return 2.0 * self.epsilon if self.icp_max_distance is None else float(self.icp_max_distance)
+        return 2.0 * self.epsilon if self.icp_max_distance == 0 else float(self.icp_max_distance)
 
 
 @dataclass
 class RegistrationConfig:
     """Everything :func:`cemnet_ros.core.register` needs besides the two clouds."""
 
-    cem: CEMConfig = field(default_factory=CEMConfig)
-    n_points: int = 768  # points per cloud fed to the network and the CEM
-    # Where mu0/sigma0 come from: "network" (sampling network) or "identity" (mu0 = 0, sigma0 = prior_sigma,
-    # the paper's no-network ablation uses N(0, I)).
-    prior: str = "network"
-    prior_sigma: Six = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    # Weights: None = the package's own weights; "official" = the official clean checkpoint shipped converted;
-    # a path to a .npz (safe format) or an official .pth.
-    weights: Optional[str] = None
-    # Official .pth checkpoints are pickles: loading them needs this explicit opt-in.
-    allow_pickle: bool = False
-    # BatchNorm statistics of the network: "batch" (as the reference, which never calls eval()) or "running".
-    batchnorm: str = "running"
-    device: str = "auto"  # "auto" = CUDA when available, else CPU
-    seed: Optional[int] = 0  # seeds the point sub-sampling
+    cem: CEMConfig = section(CEMConfig, "the cross-entropy method")
+    n_points: int = param(768, "points per cloud fed to the network and the CEM", low=32)
+    prior: str = param("network", "where mu0/sigma0 come from: the sampling network, or N(0, prior_sigma) "
+                       "(the paper's no-network ablation)", choices=("network", "identity"))
+    prior_sigma: Six = param((1.0,) * 6, "spread of the identity prior (rad, network units)", low=0.0)
+    weights: str = param("", "sampling network weights: '' = the package's, 'official' = the official clean "
+                         "checkpoint shipped converted, or a .npz / official .pth path")
+    allow_pickle: bool = param(False, "allow loading pickled (.pth) weights: only for files you trust")
+    batchnorm: str = param("running", "BatchNorm statistics of the network ('batch' as the reference, which "
+                           "never calls eval())", choices=("batch", "running"))
+    device: str = param("auto", "torch device: 'auto' (CUDA when available), 'cpu', 'cuda', 'cuda:1', ...")
+    seed: int = param(0, "seed of the point sub-sampling; -1 = unseeded", low=-1)
 
     def __post_init__(self) -> None:
         if self.prior not in ("network", "identity"):
@@ -85,3 +92,39 @@ class RegistrationConfig:
             raise ValueError(f"batchnorm must be 'batch' or 'running', not {self.batchnorm!r}")
         if self.n_points < 32:
             raise ValueError("n_points must be >= 32 (the network's k-NN graph needs k=20 neighbours)")
+
+
+@dataclass
+class GlobalSearchConfig:
+    """How wide and how long the global search looks (units: radians and engine units)."""
+
+    n_scatter: int = param(2000, "candidates of the coarse scatter over yaw and translation", low=1)
+    coarse_epsilon: float = param(0.2, "epsilon of the coarse scoring (network units; the CEM refinement uses "
+                                  "its own)", low=1e-4)
+    tilt_sigma: float = param(0.03, "roll and pitch spread of the scatter (rad)", low=0.0)
+    height_sigma: float = param(0.01, "z spread of the scatter (network units)", low=0.0)
+    n_hypotheses: int = param(4, "distinct hypotheses refined by the CEM", low=1)
+    n_seeds: int = param(16, "distinct scatter candidates resampled around", low=1)
+    n_per_seed: int = param(50, "candidates drawn around each", low=0)
+    resample_sigma: Six = param((0.1, 0.02, 0.02, 0.03, 0.03, 0.005), "spread of the resampling (rad, network "
+                                "units)", low=1e-6)
+    min_separation_yaw: float = param(0.3, "hypotheses closer in yaw (rad) AND translation count as one", low=0.0)
+    min_separation_translation: float = param(0.1, "... and in translation (network units)", low=0.0)
+    refine_sigma: Six = param((0.15, 0.02, 0.02, 0.05, 0.05, 0.01), "initial CEM spread per hypothesis (rad, "
+                              "network units)", low=1e-6)
+    refine: CEMConfig = section(lambda: CEMConfig(n_candidates=100, n_iters=5, n_fused_iters=2),
+                                "the CEM that refines each hypothesis")
+    time_budget_s: float = param(1.0, "time budget (s) of the coarse scoring: the scatter stops at 50 %, the "
+                                 "resampling at 75 % of it (one chunk at least)", low=0.01, high=60.0)
+
+    def __post_init__(self) -> None:
+        if self.n_scatter < max(self.n_hypotheses, self.n_seeds) or min(self.n_hypotheses, self.n_seeds) < 1:
+            raise ValueError("need n_scatter >= n_hypotheses, n_seeds >= 1")
+        if self.n_per_seed < 0 or len(self.resample_sigma) != 6 or min(self.resample_sigma) <= 0:
+            raise ValueError("n_per_seed must be >= 0 and resample_sigma six positive spreads")
+        if self.coarse_epsilon <= 0:
+            raise ValueError("coarse_epsilon must be > 0")
+        if len(self.refine_sigma) != 6 or min(self.refine_sigma) <= 0:
+            raise ValueError("refine_sigma must be six positive spreads")
+        if self.time_budget_s <= 0:
+            raise ValueError("time_budget_s must be > 0")

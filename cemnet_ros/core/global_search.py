@@ -20,49 +20,18 @@ Everything is in the engine's units (clouds scaled to the ModelNet unit sphere) 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 import torch
 
-from .config import CEMConfig
+from .config import CEMConfig, GlobalSearchConfig
 from .engine import CEMNet
 from .geometry import action_to_matrix_np
 from .scoring import CandidateScorer
 
 SCATTER_CHUNK = 500  # candidates scored between two looks at the clock
-
-
-@dataclass
-class GlobalSearchConfig:
-    """How wide and how long the global search looks (units: radians and engine units)."""
-
-    n_scatter: int = 2000  # candidates of the coarse scatter over yaw and translation
-    coarse_epsilon: float = 0.2  # epsilon of the coarse scoring (the fine stages use CEMConfig.epsilon)
-    tilt_sigma: float = 0.03  # rad: roll and pitch spread of the scatter
-    height_sigma: float = 0.01  # units: z spread of the scatter
-    n_hypotheses: int = 4  # distinct hypotheses refined by the CEM
-    n_seeds: int = 16  # distinct scatter candidates resampled around
-    n_per_seed: int = 50  # candidates drawn around each
-    resample_sigma: tuple[float, ...] = (0.1, 0.02, 0.02, 0.03, 0.03, 0.005)  # their spread (rad, units)
-    min_separation_yaw: float = 0.3  # rad: hypotheses closer in yaw AND translation count as one
-    min_separation_translation: float = 0.1  # units
-    refine_sigma: tuple[float, ...] = (0.15, 0.02, 0.02, 0.05, 0.05, 0.01)  # initial CEM spread per hypothesis
-    refine: CEMConfig = field(default_factory=lambda: CEMConfig(n_candidates=200, n_iters=5, n_fused_iters=2))
-    time_budget_s: float = 1.0  # scatter / resampling stop scoring at 50 / 75 % of it (one chunk at least)
-
-    def __post_init__(self) -> None:
-        if self.n_scatter < max(self.n_hypotheses, self.n_seeds) or min(self.n_hypotheses, self.n_seeds) < 1:
-            raise ValueError("need n_scatter >= n_hypotheses, n_seeds >= 1")
-        if self.n_per_seed < 0 or len(self.resample_sigma) != 6 or min(self.resample_sigma) <= 0:
-            raise ValueError("n_per_seed must be >= 0 and resample_sigma six positive spreads")
-        if self.coarse_epsilon <= 0:
-            raise ValueError("coarse_epsilon must be > 0")
-        if len(self.refine_sigma) != 6 or min(self.refine_sigma) <= 0:
-            raise ValueError("refine_sigma must be six positive spreads")
-        if self.time_budget_s <= 0:
-            raise ValueError("time_budget_s must be > 0")
 
 
 @dataclass

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import torch
 
-from .geometry import procrustes, transform_points
+from .geometry_torch import procrustes, transform_points
 from .rewards import nearest_sq_distances
 
 

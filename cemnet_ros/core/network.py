@@ -11,7 +11,7 @@ import torch.nn.functional as F
 from scipy.spatial import cKDTree
 from torch import nn
 
-from .geometry import matrix_to_euler, procrustes
+from .geometry_torch import matrix_to_euler, procrustes
 
 
 def knn_indices(points: torch.Tensor, k: int) -> torch.Tensor:

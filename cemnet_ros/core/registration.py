@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from .checkpoint import load_network
-from .config import RegistrationConfig
+from .config import RegistrationConfig, seed_or_none
 from .engine import CEMNet
 from .geometry import euler_to_matrix_np, matrix_to_action_np
 from . import nn_grid
@@ -81,9 +81,8 @@ class Registrar:
             nn_grid.compile_kernels()
 
     def _generator(self) -> torch.Generator | None:
-        if self.config.cem.seed is None:
-            return None
-        return torch.Generator(device=self.device).manual_seed(self.config.cem.seed)
+        seed = seed_or_none(self.config.cem.seed)
+        return None if seed is None else torch.Generator(device=self.device).manual_seed(seed)
 
     @torch.no_grad()
     def register_batch(self, source: torch.Tensor, target: torch.Tensor, mu0: torch.Tensor | None = None,
@@ -120,7 +119,7 @@ class Registrar:
                  prior_sigma: Optional[np.ndarray] = None) -> RegistrationResult:
         """Register one pair of (n, 3) and (m, 3) clouds; ``prior_pose`` (4x4) replaces the network's mu0."""
         start = time.perf_counter()
-        rng = np.random.default_rng(self.config.seed)
+        rng = np.random.default_rng(seed_or_none(self.config.seed))
         min_points = NETWORK_MIN_POINTS if prior_pose is None and self.config.prior == "network" else 3
         src = prepare_cloud(source, self.config.n_points, rng, "source", min_points)
         tgt = prepare_cloud(target, self.config.n_points, rng, "target", min_points)

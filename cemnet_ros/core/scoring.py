@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from . import nn_grid
 from .config import CEMConfig
-from .geometry import action_to_rt, procrustes, transform_points
+from .geometry_torch import action_to_rt, procrustes, transform_points
 from .icp import batch_icp
 from .rewards import max_consensus_reward
 

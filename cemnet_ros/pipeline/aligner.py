@@ -34,8 +34,9 @@ from cemnet_ros.pipeline.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.covariance import (Conditioning, covariance_from_hessian, flat_covariance,
                                             keep_prediction_along)
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.deskew import deskew
 from cemnet_ros.pipeline.health import HealthMonitor, Signals, disagreement
-from cemnet_ros.pipeline.motion import ConstantVelocity
+from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
 from cemnet_ros.pipeline.preprocess import (crop_range, finite_points, robust_radius,
                                             subsample, voxel_downsample)
 from cemnet_ros.pipeline import preprocess, refine
@@ -121,9 +122,9 @@ class ScanAligner:
 
     def __init__(self, config: Optional[AlignerConfig] = None, registrar: Optional[Registrar] = None) -> None:
         self.config = config or AlignerConfig()
-        reg_prior = "network" if self.config.prior == "network" else "identity"
+        reg_prior = "network" if self.config.tracking.prior == "network" else "identity"
         self._registrar = registrar or Registrar(dataclasses.replace(self.config.registration, prior=reg_prior))
-        self._fixed_scale = self.config.scale if self.config.scale > 0 else None
+        self._fixed_scale = self.config.preprocess.scale if self.config.preprocess.scale > 0 else None
         self._pair_targets: dict[int, tuple[np.ndarray, VoxelMap]] = {}
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
         refine.compile_kernels()
@@ -143,29 +144,50 @@ class ScanAligner:
     def local_map(self) -> Optional[VoxelMap]:
         return self._map
 
-    def reset(self) -> None:
-        """Forget the map, the pose and the motion model (the auto scale is measured again)."""
+    @property
+    def pose(self) -> np.ndarray:
+        """T_odom_sensor of the last scan (the identity before the first)."""
+        return self._pose.copy()
+
+    def reset(self, T_odom_sensor: Optional[np.ndarray] = None) -> None:
+        """Forget the map and the motion model (the auto scale is measured again); the next scan starts a new
+        trajectory at ``T_odom_sensor`` (default: the identity; pass :attr:`pose` to keep odom continuous)."""
         self._scale = self._fixed_scale
         self._voxel = 0.0
         self._map: Optional[VoxelMap] = None
         self._motion = ConstantVelocity()
         self._spread = AdaptiveSpread(self.config.adaptive)
         self._health = HealthMonitor(self.config.health)
-        self._pose = np.eye(4)
+        self._pose = np.eye(4) if T_odom_sensor is None else np.asarray(T_odom_sensor, dtype=np.float64).copy()
         self._last_stamp: Optional[int] = None
         self._period_ns: Optional[int] = None
         self._pending_recovery = ""  # why the next scan runs the global search ("" = it tracks)
         self._failures_in_a_row = 0
         self._pair_targets.clear()
+        self._sweep_offset_ns: Optional[int] = None  # deskewing: the reference time's offset from the stamps
+        self._published: Optional[np.ndarray] = None  # the last pose published (at its stamp)
+        self._odom_fix: Optional[np.ndarray] = None  # deskewing: T_odom_reference0 (odom: the first scan's stamp)
+        self._skewed_input: Optional[tuple[np.ndarray, np.ndarray]] = None  # this scan, timed but not deskewed
+        self._inserted: Optional[list] = None  # the map's scans while none could be deskewed (None: not tracked)
 
     def request_recovery(self) -> None:
         """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
         self._pending_recovery = "requested"
 
     # -- sequential mode ------------------------------------------------------------------------------------
-    def process(self, points: np.ndarray, stamp_ns: int) -> AlignmentStep:
-        """Register this scan against the local map and accumulate the pose."""
+    def process(self, points: np.ndarray, stamp_ns: int, point_times: Optional[np.ndarray] = None) -> AlignmentStep:
+        """Register this scan against the local map and accumulate the pose.
+
+        ``point_times``: each point's time (s, relative to ``stamp_ns``, aligned with ``points``); with
+        ``config.preprocess.deskew`` the scan is first deskewed (see :meth:`_deskewed`). The pose is the one at
+        ``stamp_ns`` in any case.
+        """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
+        points, offset_ns = self._deskewed(points, point_times, stamp_ns)
+        return self._at_stamp(self._process_at(points, stamp_ns + offset_ns, start), stamp_ns, offset_ns)
+
+    def _process_at(self, points: np.ndarray, stamp_ns: int, start: float) -> AlignmentStep:
+        """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :meth:`_deskewed`)."""
         frame = self._preprocess(points)
         if self._last_stamp is not None and stamp_ns == self._last_stamp:
             return self._held(stamp_ns, start, frame, "duplicate stamp: scan skipped")
@@ -199,6 +221,8 @@ class ScanAligner:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
         self._map = self._new_map()
         self._map.update(apply_transform(T_odom_sensor, frame.dense), T_odom_sensor[:3, 3])
+        self._inserted = []
+        self._note_inserted(T_odom_sensor)
         self._health.reset()
         self._pending_recovery = ""
         self._failures_in_a_row = 0
@@ -206,7 +230,7 @@ class ScanAligner:
     def _recovery_reason(self, dt_ns: int) -> str:
         if self._pending_recovery:
             return self._pending_recovery
-        if dt_ns * 1e-9 > self.config.recovery.recovery_gap:
+        if dt_ns * 1e-9 > self.config.recovery.gap:
             return f"stamp gap {dt_ns * 1e-9:.3f} s"
         return ""
 
@@ -225,8 +249,8 @@ class ScanAligner:
             self._pending_recovery = "the previous step failed"
             reasons.append("motion prediction used")
             if self._failures_in_a_row >= self.config.recovery.restart_after:
-                self._restart_map(frame, pose)
                 reasons.append(f"lost for {self._failures_in_a_row} scans: the map restarts from this scan")
+                self._restart_map(frame, pose)
         else:
             self._failures_in_a_row = 0
             pose = estimate.T_odom_sensor
@@ -235,6 +259,7 @@ class ScanAligner:
                 self._spread.update(np.linalg.inv(T_predicted) @ pose)
             self._health.accept(estimate.signals.fitness)
             self._map.update(apply_transform(pose, frame.dense), pose[:3, 3])
+            self._note_inserted(pose)
         self._pose = pose
         self._motion.update(pose, stamp_ns)
         self._last_stamp = stamp_ns
@@ -289,9 +314,84 @@ class ScanAligner:
         return target_map
 
     # -- the steps ------------------------------------------------------------------------------------------
+    def _deskewed(self, points: np.ndarray, point_times: Optional[np.ndarray], stamp_ns: int
+                  ) -> tuple[np.ndarray, int]:
+        """(points, offset ns): the scan in the sensor frame at its reference time ``stamp_ns + offset``.
+
+        With per-point times and ``preprocess.deskew`` the reference is the sweep's middle (fixed, from the first
+        timed scan: a driver's stamping policy does not change) and the points are moved there at the motion
+        model's velocity. Not the stamp: a registration pins the pose at the points' mean time, the pose
+        elsewhere rests on the velocity; were the reference the sweep's start (Ouster's stamp), a velocity error
+        would bias the pose, the next velocity would carry the opposite error and so on, undamped. At the
+        middle the pose does not depend on the velocity used. :meth:`_at_stamp` publishes the pose at the stamp.
+        The first scans of a trajectory have no velocity: once one is known, the map is rebuilt from them
+        deskewed (the map keeps the first points of a voxel for good: skewed ones would bias every later step).
+        """
+        self._skewed_input = None
+        if not self.config.preprocess.deskew or (point_times is None and self._sweep_offset_ns is None):
+            return points, 0
+        if self._sweep_offset_ns is None:
+            times = np.asarray(point_times, dtype=np.float64)
+            self._sweep_offset_ns = int(round(0.5 * (times.min() + times.max()) * 1e9)) if times.size else 0
+        offset_ns = self._sweep_offset_ns
+        if point_times is None:
+            return points, offset_ns
+        times = np.asarray(point_times, dtype=np.float64) - offset_ns * 1e-9
+        if (not self._motion.has_velocity or not self._period_ns or self._last_stamp is None
+                or stamp_ns + offset_ns <= self._last_stamp):  # no velocity yet, a duplicate or a restart
+            self._skewed_input = (np.asarray(points), times)
+            return points, offset_ns
+        if self._inserted:
+            self._redeskew_map()
+        self._inserted = None
+        return deskew(points, times, self._motion_over(self._period_ns), self._period_ns * 1e-9), offset_ns
+
+    def _note_inserted(self, pose: np.ndarray) -> None:
+        """Remember a scan that went into the map undeskewed (and where), for :meth:`_redeskew_map`."""
+        if self._inserted is not None:
+            self._inserted.append(None if self._skewed_input is None else (*self._skewed_input, pose.copy()))
+
+    def _redeskew_map(self) -> None:
+        """The map rebuilt from its scans deskewed at the first velocity known (only if they all had times)."""
+        if any(item is None for item in self._inserted):
+            return
+        T_period, period_s = self._motion_over(self._period_ns), self._period_ns * 1e-9
+        rebuilt = self._new_map()
+        for points, times, pose in self._inserted:
+            try:
+                dense = self._preprocess(deskew(points, times, T_period, period_s)).dense
+            except ScanRejected:
+                return  # keep the map as it is
+            rebuilt.update(apply_transform(pose, dense), pose[:3, 3])
+        self._map = rebuilt
+
+    def _motion_over(self, delta_ns: int) -> np.ndarray:
+        """The motion over ``delta_ns`` after the last scan at the model's velocity (identity without one)."""
+        if not self._motion.has_velocity or not self._period_ns:
+            return np.eye(4)
+        period = self._motion.predict_relative(self._last_stamp + self._period_ns)  # one period: never capped
+        return se3_power(period, delta_ns / self._period_ns)
+
+    def _at_stamp(self, step: AlignmentStep, stamp_ns: int, offset_ns: int) -> AlignmentStep:
+        """The step as published: the pose at ``stamp_ns`` (the reference time is ``offset_ns`` later).
+
+        The internal poses are the reference times'; odom stays the sensor frame at the first scan's stamp,
+        placed by the first velocity known (none is known at the first scan itself).
+        """
+        if offset_ns:
+            to_stamp = self._motion_over(-offset_ns)
+            if self._odom_fix is None and self._motion.has_velocity:
+                self._odom_fix = np.linalg.inv(to_stamp)
+            step.pose = (self._odom_fix if self._odom_fix is not None else np.eye(4)) @ step.pose @ to_stamp
+            if step.relative is not None and self._published is not None:
+                step.relative = np.linalg.inv(self._published) @ step.pose
+            step.stamp_ns = stamp_ns
+        self._published = step.pose
+        return step
+
     def _preprocess(self, points: np.ndarray) -> Frame:
         """Metres, cropped and voxelised; the first scan fixes the auto scale. Raises ScanRejected."""
-        cfg = self.config
+        cfg = self.config.preprocess
         cropped = crop_range(finite_points(points), cfg.min_range, cfg.max_range)
         if len(cropped) < cfg.min_points:
             raise ScanRejected(f"too few points: {len(cropped)} after range crop, need {cfg.min_points}")
@@ -304,16 +404,16 @@ class ScanAligner:
         dense = voxel_downsample(cropped, self._voxel)
         if len(dense) < cfg.min_points:
             raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {cfg.min_points}")
-        seed = cfg.registration.seed or 0
+        seed = max(self.config.registration.seed, 0)
         near = dense[np.einsum("ij,ij->i", dense, dense) <= (cfg.cem_radius * self._scale) ** 2]
         near = near if len(near) >= cfg.min_points else dense
-        return Frame(dense, subsample(dense, cfg.refine_points, "random", seed),
-                     subsample(near, cfg.registration.n_points, cfg.sampling, seed), near)
+        return Frame(dense, subsample(dense, self.config.polish.points, "random", seed),
+                     subsample(near, self.config.registration.n_points, cfg.sampling, seed), near)
 
     def _new_map(self) -> VoxelMap:
         voxel = self._voxel if self._voxel > 0 else self._scale / 100.0
-        max_distance = self.config.max_range if self.config.max_range > 0 else 10.0 * self._scale
-        return VoxelMap(voxel * self.config.map_voxel_factor, self.config.map_points_per_voxel, max_distance)
+        max_distance = self.config.preprocess.max_range if self.config.preprocess.max_range > 0 else 10.0 * self._scale
+        return VoxelMap(voxel * self.config.map.voxel_factor, self.config.map.points_per_voxel, max_distance)
 
     def _units(self, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(to_units, from_units) 4x4 maps between metres and network units centred on ``centre``."""
@@ -324,8 +424,8 @@ class ScanAligner:
 
     def _map_sample(self, target_map: VoxelMap, T_guess: np.ndarray, n: int, margin: float = 0.0) -> np.ndarray:
         """``n`` map points within the CEM's radius (+ ``margin`` m) of the guessed sensor position."""
-        radius = self.config.cem_radius * self._scale + margin
-        return target_map.sample(n, T_guess[:3, 3], radius, seed=self.config.registration.seed or 0)
+        radius = self.config.preprocess.cem_radius * self._scale + margin
+        return target_map.sample(n, T_guess[:3, 3], radius, seed=max(self.config.registration.seed, 0))
 
     def _track(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, dt_ratio: float) -> Estimate:
         """The CEM around the prediction (adaptive spread) against a map sample, then the polish.
@@ -339,13 +439,13 @@ class ScanAligner:
         to_units, from_units = self._units(target.mean(axis=0))
         clouds = apply_transform(to_units, frame.sampled), apply_transform(to_units, target)
         rotation, translation = self._spread.spread(dt_ratio)
-        sigma = (np.full(6, cfg.identity_sigma) if cfg.prior == "identity"
+        sigma = (np.full(6, cfg.tracking.identity_sigma) if cfg.tracking.prior == "identity"
                  else np.r_[np.full(3, rotation), np.full(3, translation / self._scale)])
-        centre = T_predicted if cfg.prior != "identity" else self._motion.last_pose
-        T_cem, spread_m = self._cem(clouds, to_units, from_units, None if cfg.prior == "network" else centre, sigma)
+        centre = T_predicted if cfg.tracking.prior != "identity" else self._motion.last_pose
+        T_cem, spread_m = self._cem(clouds, to_units, from_units, None if cfg.tracking.prior == "network" else centre, sigma)
         voxel = self._polish_voxel()
         max_distance = float(np.clip(translation, 2.0 * voxel, TRACKING_PAIRING * voxel))
-        polish = point_to_plane_icp(target_map, frame.polish, T_cem, max_distance, cfg.refine_iters)
+        polish = point_to_plane_icp(target_map, frame.polish, T_cem, max_distance, cfg.polish.iters)
         metres, radians = disagreement(T_predicted, polish.T_target_source)
         if metres > 3.0 * translation or radians > 3.0 * rotation:  # the motion model was wrong: look wider
             polish = self._wide_polish(frame, target_map, polish.T_target_source)
@@ -373,13 +473,13 @@ class ScanAligner:
         that the search's yaw turns about the sensor and its translation disc is the sensor's displacement.
         """
         cfg, rec = self.config, self.config.recovery
-        target = self._map_sample(target_map, T_guess, rec.recovery_points, margin=rec.recovery_radius)
+        target = self._map_sample(target_map, T_guess, rec.points, margin=rec.radius)
         to_units, from_units = self._units(T_guess[:3, 3])
         # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
         uniform = voxel_downsample(frame.near, target_map.voxel_size)
-        source = apply_transform(T_guess, subsample(uniform, rec.recovery_points, "random", cfg.registration.seed or 0))
+        source = apply_transform(T_guess, subsample(uniform, rec.points, "random", max(cfg.registration.seed, 0)))
         hypotheses = global_search(apply_transform(to_units, source), apply_transform(to_units, target), np.zeros(6),
-                                   rec.recovery_radius / self._scale, rec.search, seed=cfg.registration.seed or 0)
+                                   rec.radius / self._scale, rec.search, seed=max(cfg.registration.seed, 0))
         estimates = []
         for hypothesis in hypotheses:
             if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
@@ -388,7 +488,7 @@ class ScanAligner:
             T_cem[3] = (0.0, 0.0, 0.0, 1.0)
             polish = self._wide_polish(frame, target_map, T_cem)
             estimates.append(self._judge(frame, target_map, T_guess, T_cem, polish, 0.0, recovered=True,
-                                         prediction_std=rec.recovery_radius))
+                                         prediction_std=rec.radius))
         estimates.sort(key=lambda e: -e.signals.fitness)
         return self._resolve_ambiguity(estimates, T_guess)
 
@@ -422,7 +522,7 @@ class ScanAligner:
         rec, voxel = self.config.recovery, self._polish_voxel()
         coarse = point_to_plane_icp(target_map, frame.polish, T_start, rec.polish_distance * voxel, rec.polish_iters)
         return point_to_plane_icp(target_map, frame.polish, coarse.T_target_source, 2.0 * voxel,
-                                  self.config.refine_iters)
+                                  self.config.polish.iters)
 
     def _resolution(self) -> float:
         """Metres the CEM's max-consensus reward can tell apart: epsilon * scale."""
@@ -432,7 +532,7 @@ class ScanAligner:
         return self._voxel if self._voxel > 0 else self._scale / 100.0
 
     def _inlier_distance(self) -> float:
-        return self.config.inlier_distance * self._polish_voxel()
+        return self.config.polish.inlier_distance * self._polish_voxel()
 
     def _judge(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, T_cem: np.ndarray,
                polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float) -> Estimate:

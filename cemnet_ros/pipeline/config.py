@@ -1,20 +1,22 @@
-"""Typed configuration of the scan pipeline: one schema for the node, the YAML, the replay and the benchmarks.
+"""Typed configuration of the scan pipeline: one schema (:mod:`cemnet_ros.schema`) for the node, the params
+file, the replay and the benchmarks.
 
-Sections by concern: ``registration`` (the tracking CEM, :mod:`cemnet_ros.core.config`), ``adaptive`` (the search
-spread), ``health`` (the failure signals' limits), ``recovery`` (when and how widely the global search runs), and
-the preprocessing and map fields of :class:`AlignerConfig` itself.
+Sections by concern, named as the parameters are (``preprocess.max_range``): ``preprocess``, ``registration``
+(the tracking CEM, :mod:`cemnet_ros.core.config`), ``tracking`` (where it searches), ``adaptive`` (how widely),
+``map``, ``polish``, ``health`` (the failure signals' limits) and ``recovery`` (the global search).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
-from cemnet_ros.core import CEMConfig, RegistrationConfig
-from cemnet_ros.core.global_search import GlobalSearchConfig
+from cemnet_ros.core.config import CEMConfig, GlobalSearchConfig, RegistrationConfig
 from cemnet_ros.pipeline.adaptive import AdaptiveConfig
 from cemnet_ros.pipeline.health import HealthConfig
 from cemnet_ros.pipeline.preprocess import SAMPLING_METHODS
+from cemnet_ros.schema import param, section
 
 PRIORS = ("motion", "network", "identity")
+DERIVED = ("registration.prior",)  # set from tracking.prior: not a parameter of the pipeline
 
 
 def odometry_registration() -> RegistrationConfig:
@@ -27,66 +29,100 @@ def odometry_registration() -> RegistrationConfig:
 
 
 @dataclass
+class PreprocessConfig:
+    """What of a scan is used (metres from the sensor)."""
+
+    scale: float = param(0.0, "metres per network unit; 0 = auto (robust radius of the first scan)", low=0.0)
+    voxel_size: float = param(0.0, "voxel grid (m); 0 = auto (scale / 100), negative = no voxel grid", low=-1.0)
+    min_range: float = param(0.0, "drop points closer than this to the sensor (m); 0 = off", low=0.0)
+    max_range: float = param(100.0, "drop points farther than this from the sensor (m); 0 = off", low=0.0)
+    min_points: int = param(50, "a scan with fewer points after preprocessing is rejected", low=3)
+    sampling: str = param("random", "how the voxel cloud is cut to registration.n_points", choices=SAMPLING_METHODS)
+    cem_radius: float = param(1.5, "the CEM's clouds keep the points this close to the sensor (units of scale)",
+                              low=1e-3)
+    deskew: bool = param(True, "with per-point times: move each point to the sensor frame at the stamp "
+                         "(constant velocity)")
+
+    def __post_init__(self) -> None:
+        if self.sampling not in SAMPLING_METHODS:
+            raise ValueError(f"sampling must be one of {SAMPLING_METHODS}, not {self.sampling!r}")
+        if self.min_points < 3:
+            raise ValueError("min_points must be >= 3")
+        if 0 < self.max_range < self.min_range:
+            raise ValueError("max_range must be >= min_range (or 0 = no crop)")
+        if self.cem_radius <= 0:
+            raise ValueError("cem_radius must be > 0")
+
+
+@dataclass
+class TrackingConfig:
+    """Where the tracking CEM searches."""
+
+    prior: str = param("motion", "centre of the tracking CEM: the constant-velocity prediction, the sampling "
+                       "network's, or N(0, identity_sigma) around the last pose", choices=PRIORS)
+    identity_sigma: float = param(1.0, "spread of the identity prior (rad and network units; paper: N(0, I))",
+                                  low=1e-4)
+
+    def __post_init__(self) -> None:
+        if self.prior not in PRIORS:
+            raise ValueError(f"prior must be one of {PRIORS}, not {self.prior!r}")
+        if self.identity_sigma <= 0:
+            raise ValueError("identity_sigma must be > 0")
+
+
+@dataclass
+class MapConfig:
+    """The local map (a voxel hash map in the odom frame)."""
+
+    voxel_factor: float = param(3.0, "map voxel = this x the frame voxel", low=0.1)
+    points_per_voxel: int = param(10, "points kept per map voxel", low=1)
+
+
+@dataclass
+class PolishConfig:
+    """The point-to-plane polish against the map, and the fitness it is judged by."""
+
+    iters: int = param(10, "point-to-plane polish iterations (at most)", low=1)
+    points: int = param(3000, "source points the polish uses at most (a seeded subset of the voxel cloud)", low=10)
+    inlier_distance: float = param(2.0, "a point with a map point this close (frame voxels) counts for the "
+                                   "fitness", low=1e-3)
+
+
+@dataclass
 class RecoveryConfig:
     """When and how widely the global search runs (metres, radians, seconds)."""
 
-    search: GlobalSearchConfig = field(default_factory=GlobalSearchConfig)
-    recovery_radius: float = 10.0  # m: translation disc searched around the prediction
-    recovery_points: int = 1024  # source and map points the global search scores
-    recovery_gap: float = 1.0  # s: a stamp gap longer than this triggers a recovery (a recovery itself takes ~0.5 s)
-    ambiguity_ratio: float = 0.9  # a distinct hypothesis this close in fitness makes the answer ambiguous
-    polish_distance: float = 6.0  # in frame voxels: the first pairing distance of a hypothesis' polish
-    polish_iters: int = 30  # its iterations at that distance (a hypothesis can be degrees off)
-    restart_after: int = 3  # consecutive failed steps after which the map restarts from the scan (lost)
+    search: GlobalSearchConfig = section(GlobalSearchConfig, "the global CEM search")
+    radius: float = param(10.0, "translation radius (m) searched around the prediction; yaw is searched "
+                                   "over the full circle", low=0.0)
+    points: int = param(256, "source and map points the global search scores (the polish brings the "
+                                 "precision)", low=32)
+    gap: float = param(1.0, "a stamp gap longer than this (s) triggers the global search", low=1e-3)
+    ambiguity_ratio: float = param(0.9, "a distinct hypothesis this close in fitness makes the answer ambiguous",
+                                   low=0.01, high=1.0)
+    polish_distance: float = param(6.0, "first pairing distance of a hypothesis' polish (frame voxels)", low=0.1)
+    polish_iters: int = param(30, "its iterations at that distance (a hypothesis can be degrees off)", low=1)
+    restart_after: int = param(3, "consecutive failed steps after which the map restarts from the scan (lost)",
+                               low=1)
 
     def __post_init__(self) -> None:
-        if self.recovery_radius < 0 or self.recovery_gap <= 0 or self.polish_distance <= 0:
-            raise ValueError("recovery_radius must be >= 0, recovery_gap and polish_distance > 0")
-        if self.recovery_points < 32 or self.restart_after < 1 or self.polish_iters < 1:
-            raise ValueError("recovery_points must be >= 32, restart_after and polish_iters >= 1")
+        if self.radius < 0 or self.gap <= 0 or self.polish_distance <= 0:
+            raise ValueError("recovery radius must be >= 0, gap and polish_distance > 0")
+        if self.points < 32 or self.restart_after < 1 or self.polish_iters < 1:
+            raise ValueError("recovery points must be >= 32, restart_after and polish_iters >= 1")
         if not 0.0 < self.ambiguity_ratio <= 1.0:
             raise ValueError("ambiguity_ratio must lie in (0, 1]")
 
 
 @dataclass
 class AlignerConfig:
-    """Everything the scan pipeline needs; nested sections by concern."""
+    """Everything the scan pipeline needs; sections by concern."""
 
-    registration: RegistrationConfig = field(default_factory=odometry_registration)
-    adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
-    health: HealthConfig = field(default_factory=HealthConfig)
-    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
-    prior: str = "motion"  # tracking CEM centre: "motion" (constant velocity), "network" or "identity"
-    identity_sigma: float = 1.0  # rad and network units: spread of the "identity" prior (paper: N(0, I))
-    scale: float = 0.0  # metres per network unit; <= 0 = auto (robust radius of the first scan)
-    voxel_size: float = 0.0  # metres; 0 = auto (scale / 100); < 0 = no voxel grid
-    min_range: float = 0.0  # metres from the sensor; 0 = no lower crop
-    max_range: float = 100.0  # metres from the sensor; 0 = no upper crop
-    sampling: str = "random"  # how the voxel cloud is cut to n_points: "random" (seeded) or "farthest"
-    min_points: int = 50  # fewer points after preprocessing -> ScanRejected
-    map_voxel_factor: float = 3.0  # map voxel = this x the frame voxel
-    map_points_per_voxel: int = 10
-    refine_iters: int = 10  # point-to-plane polish iterations (at most)
-    refine_points: int = 3000  # source points the polish uses at most (a seeded subset of the voxel cloud)
-    inlier_distance: float = 2.0  # in frame voxels: a point with a map point this close counts for the fitness
-    cem_radius: float = 1.5  # in units of scale: the CEM's clouds keep points this close to the sensor
-
-    def __post_init__(self) -> None:
-        if self.prior not in PRIORS:
-            raise ValueError(f"prior must be one of {PRIORS}, not {self.prior!r}")
-        if self.sampling not in SAMPLING_METHODS:
-            raise ValueError(f"sampling must be one of {SAMPLING_METHODS}, not {self.sampling!r}")
-        if self.identity_sigma <= 0:
-            raise ValueError("identity_sigma must be > 0")
-        if self.min_points < 3:
-            raise ValueError("min_points must be >= 3")
-        if 0 < self.max_range < self.min_range:
-            raise ValueError("max_range must be >= min_range (or 0 = no crop)")
-        if self.map_voxel_factor <= 0 or self.map_points_per_voxel < 1 or self.inlier_distance <= 0:
-            raise ValueError("map_voxel_factor, map_points_per_voxel and inlier_distance must be > 0")
-        if self.refine_iters < 1:
-            raise ValueError("refine_iters must be >= 1")
-        if self.refine_points < 10:
-            raise ValueError("refine_points must be >= 10")
-        if self.cem_radius <= 0:
-            raise ValueError("cem_radius must be > 0")
+    preprocess: PreprocessConfig = section(PreprocessConfig, "what of a scan is used")
+    registration: RegistrationConfig = section(odometry_registration, "the tracking CEM and its network")
+    tracking: TrackingConfig = section(TrackingConfig, "where the tracking CEM searches")
+    adaptive: AdaptiveConfig = section(AdaptiveConfig, "how widely it searches (from the recent prediction errors)")
+    map: MapConfig = section(MapConfig, "the local map")
+    polish: PolishConfig = section(PolishConfig, "the point-to-plane polish against the map")
+    health: HealthConfig = section(HealthConfig, "the failure signals' limits")
+    recovery: RecoveryConfig = section(RecoveryConfig, "when and how widely the global search runs")

@@ -20,22 +20,31 @@ from dataclasses import dataclass
 import numpy as np
 
 from cemnet_ros.core.geometry import rotation_angle_rad
+from cemnet_ros.schema import param
 
 
 @dataclass
 class HealthConfig:
     """Limits of the failure signals (fractions, metres, radians)."""
 
-    min_fitness: float = 0.3  # absolute floor on the inlier fraction after the polish
-    fitness_drop: float = 0.7  # flag when the fitness falls below this fraction of its running level
-    level_memory: float = 0.9  # running level: level <- memory * level + (1 - memory) * fitness
+    min_fitness: float = param(0.3, "inlier fraction after the polish below which a step fails", low=0.0,
+                               high=0.99)
+    fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
+                                "level", low=0.01, high=1.0)
+    level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
+                                low=0.0, high=0.999)
     # Translation limits are in units of the CEM's resolution, epsilon * scale (2.6 m on a KITTI scan, 14 cm
     # on an RGB-D frame): what the max-consensus reward can tell apart.
-    max_disagreement_translation: float = 0.4  # polish vs CEM
-    max_disagreement_rotation: float = 0.05  # rad
-    min_conditioning: float = 0.005  # lambda_min / lambda_max of the normalised Hessian; below: degenerate
-    max_spread_translation: float = 0.4  # the CEM's final spread (largest translation component)
-    covariance_inflation: float = 100.0  # variance factor of a failed step
+    max_disagreement_translation: float = param(0.4, "polish vs CEM translation disagreement above which a step "
+                                                "fails (units of epsilon x scale)", low=1e-4)
+    max_disagreement_rotation: float = param(0.05, "polish vs CEM rotation disagreement above which a step fails "
+                                             "(rad)", low=1e-4)
+    min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
+                                    "below which a step is degenerate (flagged, prediction kept along the free "
+                                    "direction)", low=0.0, high=0.99)
+    max_spread_translation: float = param(0.4, "the CEM's final translation spread above which a step fails "
+                                          "(units of epsilon x scale)", low=1e-4)
+    covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_fitness < 1.0 or not 0.0 < self.fitness_drop <= 1.0:

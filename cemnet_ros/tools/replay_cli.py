@@ -6,7 +6,7 @@ writes into ``--out``: ``replay.mcap`` (/cemnet/pose, /cemnet/odometry, /cemnet/
 against the ground truth, per-pair errors, latency and throughput.
 
     cemnet-replay bags/kitti_00_6scans.mcap --out results/replay/kitti
-    cemnet-replay bags/synthetic_lidar.mcap --n-candidates 300 --n-iters 6 --limit 8
+    cemnet-replay bags/synthetic_lidar.mcap --registration.cem.n_candidates 300 --limit 8
 """
 from __future__ import annotations
 
@@ -23,26 +23,23 @@ import yaml
 from tqdm import tqdm
 
 from cemnet_ros.io.atomic import atomic_write_text
-from cemnet_ros.pipeline.params import aligner_config_from_params
+from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.replay.bag_io import BagError, BagReader, BagWriter
 from cemnet_ros.replay.trajectory import (absolute_trajectory_error, associate, relative_pose_errors,
                                           write_tum)
+from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.schema import add_arguments, build, flatten_mapping, parameters, parsed_overrides
 
 ODOM_FRAME = "odom"
 POSE_TOPIC, ODOM_TOPIC, CLOUD_TOPIC = "/cemnet/pose", "/cemnet/odometry", "/cemnet/aligned_cloud"
 
-# CLI override -> config field. Names are looked up in AlignerConfig, then RegistrationConfig, then CEMConfig.
-OVERRIDES = {
-    "prior": str, "n_candidates": int, "n_iters": int, "n_fused_iters": int, "n_points": int, "scale": float,
-    "voxel_size": float, "refine_icp_steps": int, "refine_iters": int, "refine_points": int, "min_range": float,
-    "max_range": float, "sampling": str, "weights": str, "min_fitness": float, "seed": int,
-    "recovery_radius": float, "min_conditioning": float, "time_budget_s": float,
-}
+PIPELINE = parameters(AlignerConfig(), exclude=DERIVED)  # the flags and params-file names it accepts
 
 
 # ---------------------------------------------------------------------------------------------- config
 def load_params(path: Optional[Path]) -> dict[str, Any]:
-    """Parameters from a YAML file: a flat mapping or ROS style ``<node>: {ros__parameters: {...}}``."""
+    """Pipeline parameters (dotted names) from a YAML file: ROS style ``<node or /**>: {ros__parameters: ...}``
+    or a plain mapping, nested or dotted; the node's own parameters (topics, frames) are ignored here."""
     if path is None:
         return {}
     data = yaml.safe_load(Path(path).read_text()) or {}
@@ -52,11 +49,8 @@ def load_params(path: Optional[Path]) -> dict[str, Any]:
         if isinstance(value, dict) and "ros__parameters" in value:
             data = value["ros__parameters"]
             break
-    # ROS parameter files flatten nested names with dots (registration.cem.n_iters) or use plain names.
-    flat: dict[str, Any] = {}
-    for key, value in data.items():
-        flat[str(key).split(".")[-1]] = value
-    return flat
+    node_only = set(parameters(NodeConfig()))
+    return {k: v for k, v in flatten_mapping(data).items() if k not in node_only}
 
 
 # ---------------------------------------------------------------------------------------------- replay
@@ -182,8 +176,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     p.add_argument("--limit", type=int, default=None, help="process only the first N scans")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    for name, typ in OVERRIDES.items():
-        p.add_argument("--" + name.replace("_", "-"), type=typ, default=None, dest=name)
+    add_arguments(p, PIPELINE, "pipeline parameters (docs/node.md; they override --config)")
     args = p.parse_args(argv)
     if args.limit is not None and args.limit < 1:
         p.error("--limit must be >= 1")
@@ -193,9 +186,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(argv)
     try:
-        params = load_params(args.config)
-        params.update({k: getattr(args, k) for k in OVERRIDES if getattr(args, k) is not None})
-        config = aligner_config_from_params(params)
+        params = {**load_params(args.config), **parsed_overrides(args, PIPELINE)}
+        config = build(AlignerConfig(), params, exclude=DERIVED)
     except (OSError, ValueError, TypeError, yaml.YAMLError) as err:
         print(f"cemnet-replay: bad configuration: {err}", file=sys.stderr)
         return 2

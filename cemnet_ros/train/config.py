@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Optional
 
-from cemnet_ros.core.config import CEMConfig
+from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
 
 
@@ -22,7 +22,7 @@ LR_SCHEDULES = ("constant", "cosine")
 
 def _train_cem() -> CEMConfig:
     """The CEM as the reference trains it: no fused reward, no exploration blend, unseeded noise."""
-    return CEMConfig(n_candidates=1000, n_iters=10, n_fused_iters=0, exploration_weight=0.0, seed=None)
+    return CEMConfig(n_candidates=1000, n_iters=10, n_fused_iters=0, exploration_weight=0.0, seed=UNSEEDED)
 
 
 @dataclass

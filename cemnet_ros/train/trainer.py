@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from cemnet_ros.core.checkpoint import load_network
 from cemnet_ros.core.engine import CEMNet
-from cemnet_ros.core.geometry import action_to_rt, transform_points
+from cemnet_ros.core.geometry_torch import action_to_rt, transform_points
 from cemnet_ros.core.losses import geman_mcclure_loss
 from cemnet_ros.core.network import SamplingNetwork
 from cemnet_ros.eval.metrics import aggregate, pair_metrics

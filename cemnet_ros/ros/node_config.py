@@ -1,0 +1,97 @@
+"""The node's parameters: its own (topics, frames, QoS, outputs) and the pipeline's, from one schema.
+
+No rclpy here: the params file, the docs table and the tests read the same schema without a ROS install.
+Regenerate the shipped params file with ``python -m cemnet_ros.ros.node_config > config/align_node.yaml`` and
+the docs' table with ``--markdown``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
+from cemnet_ros.schema import Parameter, build, param, parameters, params_yaml
+
+MODES = ("sequential", "pair")
+RELIABILITIES = ("best_effort", "reliable")
+COVARIANCE_MODES = ("registration", "fixed")
+
+
+@dataclass
+class NodeConfig:
+    """ROS wiring of ``align_node``; the pipeline's sections (:class:`AlignerConfig`) sit beside it."""
+
+    mode: str = param("sequential", "'sequential' (scan-to-map odometry) or 'pair' (source to target topic)",
+                      choices=MODES)
+    input_topic: str = param("points", "PointCloud2 input of sequential mode")
+    source_topic: str = param("source", "PointCloud2 source of pair mode")
+    target_topic: str = param("target", "PointCloud2 target of pair mode (subscribed TRANSIENT_LOCAL by default)")
+    target_transient_local: bool = param(True, "pair mode: subscribe the target RELIABLE + TRANSIENT_LOCAL (a "
+                                         "latched map); false = same QoS as the source")
+    pair_tolerance: float = param(0.05, "pair mode: max |stamp difference| in s; 0 = always use the latest target",
+                                  low=0.0, high=3600.0)
+    odom_frame: str = param("odom", "parent frame of the pose, odometry and TF (REP-105)")
+    base_frame: str = param("base_link", "the robot's frame: child of odometry and TF, whose motion is published")
+    base_to_sensor: tuple = param((0.0,) * 6, "pose of the sensor in base_frame (x y z m, roll pitch yaw rad), "
+                                  "used when TF does not give it (no tf2_ros, or no transform)")
+    publish_tf: bool = param(True, "publish odom -> base_frame on /tf")
+    invert_tf: bool = param(False, "publish base_frame -> odom instead (when another node owns odom -> base)")
+    qos_reliability: str = param("best_effort", "input QoS reliability ('best_effort' = sensor data)",
+                                 choices=RELIABILITIES)
+    qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
+    queue_size: int = param(5, "scans waiting for the worker (5 absorb a global search at 20 Hz); when full the "
+                            "oldest is dropped", low=1, high=100)
+    covariance_mode: str = param("registration", "'registration': from the polish's Hessian (docs/node.md); "
+                                 "'fixed': the fixed variances below", choices=COVARIANCE_MODES)
+    fixed_position_variance: float = param(0.01, "covariance_mode fixed: x, y, z variance (m^2) per step",
+                                           low=1e-12)
+    fixed_orientation_variance: float = param(0.001, "covariance_mode fixed: roll, pitch, yaw variance (rad^2) "
+                                              "per step", low=1e-12)
+    publish_aligned_cloud: bool = param(False, "publish each scan in odom_frame on ~/aligned_cloud (all fields)")
+    aligned_cloud_voxel: float = param(0.0, "voxel grid (m) of ~/aligned_cloud; 0 = full resolution", low=0.0)
+    local_map_period: float = param(1.0, "seconds between ~/local_map publications; 0 = never", low=0.0)
+    input_timeout: float = param(1.0, "diagnostics WARN when no scan came for this long (s), ERROR after 3x",
+                                 low=0.01)
+
+
+def node_parameters() -> dict[str, Parameter]:
+    """Every ROS parameter of the node: its own, then the pipeline's (dotted), by name."""
+    own = parameters(NodeConfig())
+    pipeline = parameters(AlignerConfig(), exclude=DERIVED)
+    clash = set(own) & set(pipeline)
+    if clash:
+        raise TypeError(f"node and pipeline parameters share names: {sorted(clash)}")
+    return {**own, **pipeline}
+
+
+def configs_from_parameters(values: Mapping[str, Any]) -> tuple[NodeConfig, AlignerConfig]:
+    """(NodeConfig, AlignerConfig) from parameter values by name; ValueError names a bad one."""
+    own = set(parameters(NodeConfig()))
+    node = build(NodeConfig(), {k: v for k, v in values.items() if k in own})
+    pipeline = build(AlignerConfig(), {k: v for k, v in values.items() if k not in own}, exclude=DERIVED)
+    return node, pipeline
+
+
+HEADER = """align_node parameters (ROS 2 params file, keyed /** so that it applies under any namespace or node name).
+  ros2 launch cemnet_ros align_node.launch.py   (uses the installed copy of this file)
+  ros2 run cemnet_ros align_node --ros-args --params-file $(ros2 pkg prefix cemnet_ros)/share/cemnet_ros/config/align_node.yaml
+Every parameter is read once at start-up. Generated from the schema: python -m cemnet_ros.ros.node_config"""
+
+
+def params_file_text() -> str:
+    return params_yaml(node_parameters(), HEADER)
+
+
+def parameters_markdown() -> str:
+    """The docs' parameter table (docs/node.md holds it between markers; a test compares)."""
+    rows = ["| name | default | meaning |", "| --- | --- | --- |"]
+    for p in node_parameters().values():
+        default = list(p.default) if p.kind is tuple else p.default
+        rows.append(f"| `{p.name}` | `{default}` | {p.describe().replace('|', '/')} |")
+    return "\n".join(rows) + "\n"
+
+
+if __name__ == "__main__":
+    import sys
+
+    print(parameters_markdown() if "--markdown" in sys.argv else params_file_text(), end="")

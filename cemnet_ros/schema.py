@@ -1,0 +1,191 @@
+"""One parameter schema: each setting's default, help, range and choices live in its config dataclass field.
+
+The node declares its ROS parameters from it, the CLIs build their flags from it, and params files are written
+and checked against it. Names are dotted by section, as in KISS-ICP: ``registration.cem.n_iters``,
+``preprocess.max_range``. No dependency beyond the standard library (the core imports it).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping, Optional
+
+
+def param(default: Any, help: str, *, low: Optional[float] = None, high: Optional[float] = None,
+          choices: Optional[tuple] = None) -> Any:
+    """A documented config field: ``low``/``high`` bound numbers (inclusive), ``choices`` strings."""
+    return field(default=default, metadata={"help": help, "low": low, "high": high, "choices": choices})
+
+
+def section(factory: Callable[[], Any], help: str) -> Any:
+    """A nested config section (its fields are named ``<section>.<field>``)."""
+    return field(default_factory=factory, metadata={"help": help})
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One leaf of a config tree, as the node, the CLIs and the params file see it."""
+
+    name: str  # dotted
+    default: Any  # bool, int, float, str or a tuple of floats
+    help: str
+    low: Optional[float] = None
+    high: Optional[float] = None
+    choices: Optional[tuple] = None
+
+    @property
+    def kind(self) -> type:
+        return type(self.default)
+
+    def describe(self) -> str:
+        """The help with its range or choices, e.g. for a ROS parameter descriptor or a YAML comment."""
+        limits = []
+        if self.choices:
+            limits.append("one of " + ", ".join(map(str, self.choices)))
+        if self.low is not None or self.high is not None:
+            limits.append(f"range [{'-inf' if self.low is None else self.low}, "
+                          f"{'inf' if self.high is None else self.high}]")
+        return self.help + (f" ({'; '.join(limits)})" if limits else "")
+
+    def check(self, value: Any) -> Any:
+        """``value`` converted to this parameter's type; ValueError naming the parameter if it does not fit."""
+        kind = self.kind
+        try:
+            if kind is bool:
+                if not isinstance(value, bool):
+                    raise TypeError("expected true or false")
+            elif kind is int:
+                if isinstance(value, bool) or not float(value).is_integer():
+                    raise TypeError("expected an integer")
+                value = int(value)
+            elif kind is float:
+                if isinstance(value, bool):
+                    raise TypeError("expected a number")
+                value = float(value)
+            elif kind is str:
+                if not isinstance(value, str):
+                    raise TypeError("expected a string")
+            elif kind is tuple:
+                value = tuple(float(v) for v in value)
+                if len(value) != len(self.default):
+                    raise TypeError(f"expected {len(self.default)} numbers")
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"parameter {self.name}: {value!r}: {err}") from None
+        if self.choices and value not in self.choices:
+            raise ValueError(f"parameter {self.name} must be one of {self.choices}, not {value!r}")
+        numbers = value if kind is tuple else (value,) if kind in (int, float) else ()
+        for v in numbers:
+            if (self.low is not None and v < self.low) or (self.high is not None and v > self.high):
+                raise ValueError(f"parameter {self.name} = {value!r} outside [{self.low}, {self.high}]")
+        return value
+
+
+def parameters(config: Any, exclude: Iterable[str] = (), prefix: str = "") -> dict[str, Parameter]:
+    """Every documented leaf of ``config`` (an instance: its values are the defaults), by dotted name."""
+    excluded, out = set(exclude), {}
+    for f in dataclasses.fields(config):
+        name, value = prefix + f.name, getattr(config, f.name)
+        if name in excluded:
+            continue
+        if "help" not in f.metadata:
+            raise TypeError(f"{type(config).__name__}.{f.name} has no help: declare it with schema.param")
+        if dataclasses.is_dataclass(value):
+            out.update(parameters(value, excluded, name + "."))
+        else:
+            out[name] = Parameter(name, value, f.metadata["help"], f.metadata.get("low"), f.metadata.get("high"),
+                                  f.metadata.get("choices"))
+    return out
+
+
+def values(config: Any, exclude: Iterable[str] = ()) -> dict[str, Any]:
+    """The values in force, by dotted name (e.g. to log them at start-up)."""
+    return {name: _get(config, name) for name in parameters(config, exclude)}
+
+
+def build(config: Any, overrides: Mapping[str, Any], exclude: Iterable[str] = ()) -> Any:
+    """A copy of ``config`` with dotted ``overrides`` checked and applied (each section validates itself)."""
+    known = parameters(config, exclude)
+    unknown = sorted(set(overrides) - set(known))
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown}; known: see docs/node.md or --help")
+    tree: dict = {}
+    for name, value in overrides.items():
+        *path, leaf = name.split(".")
+        node = tree
+        for part in path:
+            node = node.setdefault(part, {})
+        node[leaf] = known[name].check(value)
+    return _replace(config, tree)
+
+
+def _replace(config: Any, tree: dict) -> Any:
+    changes = {k: _replace(getattr(config, k), v) if isinstance(v, dict) else v for k, v in tree.items()}
+    return dataclasses.replace(config, **changes)
+
+
+def _get(config: Any, name: str) -> Any:
+    for part in name.split("."):
+        config = getattr(config, part)
+    return config
+
+
+def flatten_mapping(data: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested mappings (YAML sections) -> dotted names; dotted keys pass through."""
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        name = prefix + str(key)
+        if isinstance(value, Mapping):
+            out.update(flatten_mapping(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def params_yaml(params: Mapping[str, Parameter], header: str, node: str = "/**") -> str:
+    """A ROS 2 params file of ``params`` at their defaults, each with its help as a comment."""
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    lines += [f"{node}:", "  ros__parameters:"]
+    for p in params.values():
+        lines.append(f"    # {p.describe()}")
+        lines.append(f"    {p.name}: {_yaml_value(p.default)}")
+    return "\n".join(lines) + "\n"
+
+
+def _yaml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_yaml_value(float(v)) for v in value) + "]"
+    return repr(float(value)) if isinstance(value, float) else str(value)
+
+
+def add_arguments(parser: argparse.ArgumentParser, params: Mapping[str, Parameter], title: str) -> None:
+    """One ``--<dotted.name>`` flag per parameter (absent flags keep the config's value)."""
+    group = parser.add_argument_group(title)
+    for p in params.values():
+        help_text = p.describe().replace("%", "%%")  # argparse formats help strings
+        kwargs: dict[str, Any] = {"dest": p.name, "default": argparse.SUPPRESS, "help": help_text}
+        if p.choices:
+            kwargs.update(type=p.kind, choices=p.choices)
+        elif p.kind is bool:
+            kwargs.update(type=_boolean, metavar="{true,false}")
+        elif p.kind is tuple:
+            kwargs.update(type=float, nargs=len(p.default), metavar="X")
+        else:
+            kwargs.update(type=p.kind, metavar=p.kind.__name__.upper())
+        group.add_argument("--" + p.name, **kwargs)
+
+
+def parsed_overrides(args: argparse.Namespace, params: Mapping[str, Parameter]) -> dict[str, Any]:
+    """The flags of :func:`add_arguments` that were given, by dotted name."""
+    return {name: value for name, value in vars(args).items() if name in params}
+
+
+def _boolean(text: str) -> bool:
+    lowered = text.strip().lower()
+    if lowered not in ("true", "false", "1", "0", "yes", "no"):
+        raise argparse.ArgumentTypeError(f"expected true or false, not {text!r}")
+    return lowered in ("true", "1", "yes")

@@ -1,0 +1,77 @@
+"""Start ``align_node`` (CEMNet odometry), optionally with RViz2 and a bag replay.
+
+    ros2 launch cemnet_ros align_node.launch.py input_topic:=/velodyne_points
+    ros2 launch cemnet_ros align_node.launch.py bag:=my_run.mcap use_sim_time:=true rviz:=false
+
+``ros2 launch cemnet_ros align_node.launch.py --show-args`` lists the arguments. See docs/install_ros.md.
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, ExecuteProcess
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration, NotEqualsSubstitution
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+
+
+def generate_launch_description():
+    share = get_package_share_directory("cemnet_ros")  # the installed copy, not the source tree
+    use_sim_time = LaunchConfiguration("use_sim_time")
+    bag = LaunchConfiguration("bag")
+
+    arguments = [
+        DeclareLaunchArgument("input_topic", default_value="points",
+                              description="sensor_msgs/PointCloud2 scans to align (sequential mode)"),
+        DeclareLaunchArgument("params_file",
+                              default_value=os.path.join(share, "config", "align_node.yaml"),
+                              description="align_node parameters (ROS 2 params file); the arguments below "
+                                          "override the file's input_topic, odom_frame, base_frame, use_sim_time"),
+        DeclareLaunchArgument("use_sim_time", default_value="false",
+                              description="use the /clock topic (set true when replaying a bag)"),
+        DeclareLaunchArgument("odom_frame", default_value="odom",
+                              description="parent frame of the odometry and the TF (REP-105 odom)"),
+        DeclareLaunchArgument("base_frame", default_value="base_link",
+                              description="child frame of the odometry and the TF"),
+        DeclareLaunchArgument("rviz", default_value="true",
+                              description="start RViz2 with the package's view"),
+        DeclareLaunchArgument("bag", default_value="",
+                              description="rosbag2 to replay with 'ros2 bag play <bag> --clock' ('' = none); "
+                                          "also set use_sim_time:=true, and input_topic to the bag's cloud topic"),
+    ]
+
+    align_node = Node(
+        package="cemnet_ros",
+        executable="align_node",
+        name="align_node",
+        output="screen",
+        # The params file, then the launch arguments: later entries win, so the arguments override the file.
+        # Launch parses values as YAML; value_type=str keeps a topic or frame such as "1" or "on" a string.
+        parameters=[
+            LaunchConfiguration("params_file"),
+            {
+                "input_topic": ParameterValue(LaunchConfiguration("input_topic"), value_type=str),
+                "odom_frame": ParameterValue(LaunchConfiguration("odom_frame"), value_type=str),
+                "base_frame": ParameterValue(LaunchConfiguration("base_frame"), value_type=str),
+                "use_sim_time": use_sim_time,
+            },
+        ],
+    )
+
+    rviz = Node(
+        package="rviz2",
+        executable="rviz2",
+        arguments=["-d", os.path.join(share, "rviz", "cemnet_ros.rviz")],
+        parameters=[{"use_sim_time": use_sim_time}],  # the TF and the clouds carry the bag's stamps
+        output="screen",
+        condition=IfCondition(LaunchConfiguration("rviz")),
+    )
+
+    bag_play = ExecuteProcess(
+        cmd=["ros2", "bag", "play", bag, "--clock"],  # --clock publishes /clock for use_sim_time
+        output="screen",
+        condition=IfCondition(NotEqualsSubstitution(bag, "")),
+    )
+
+    return LaunchDescription(arguments + [align_node, rviz, bag_play])
