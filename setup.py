@@ -34,7 +34,7 @@ setup(
         "test": ["pytest>=7", "colcon-common-extensions"],
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         "open3d": ["open3d-cpu>=0.18"],
-        "bench": ["kiss-icp", "small-gicp"],
+        "bench": ["kiss-icp", "small-gicp", "evo"],
     },
     zip_safe=True,
     maintainer="cemnet_ros maintainers",

@@ -59,7 +59,7 @@ class EncodedCloud:
     data: bytes
 
 
-def _as_bytes(data: Any) -> np.ndarray:
+def as_bytes(data: Any) -> np.ndarray:
     """``msg.data`` (bytes, array.array('B'), numpy uint8 or a list of ints) as a contiguous uint8 array."""
     if isinstance(data, (bytes, bytearray, memoryview, array.array)):
         return np.frombuffer(data, dtype=np.uint8)
@@ -109,7 +109,7 @@ def _xyz_rows(msg: Any) -> Tuple[np.ndarray, np.ndarray]:
     if row_step < width * point_step:
         raise CloudError("layout",
                          f"row_step {row_step} is smaller than width * point_step = {width * point_step}")
-    buf = _as_bytes(msg.data)
+    buf = as_bytes(msg.data)
     if len(buf) < row_step * height:
         raise CloudError("truncated", f"truncated cloud: {len(buf)} bytes of data, expected row_step * height "
                                       f"= {row_step * height}")

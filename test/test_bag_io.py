@@ -175,3 +175,57 @@ def test_undecodable_cloud_names_the_message(tmp_path):
     with BagReader(path) as reader:
         with pytest.raises(BagError, match="message 1: .*no finite point"):
             list(reader.clouds())
+
+
+def test_odometry_twist_and_transform_messages(tmp_path):
+    """What the replay writes for align_node's outputs: Odometry with twist + covariances, TFMessage."""
+    from cemnet_ros.replay.bag_io import UNKNOWN_VARIANCE
+
+    path = tmp_path / "live.mcap"
+    cov, twist_cov = np.diag([1.0, 2, 3, 4, 5, 6]), np.diag([7.0, 8, 9, 10, 11, 12])
+    T = _pose(0.4, (1, -2, 0.5))
+    with BagWriter(path) as bag:
+        bag.write_odometry("/odom", T, cov, "odom", "base_link", STAMP0)  # the first step: twist unknown
+        bag.write_odometry("/odom", T, cov, "odom", "base_link", STAMP0 + 1, linear=(1.0, 2.0, 3.0),
+                           angular=np.array([0.1, 0.2, 0.3]), twist_covariance=twist_cov)
+        bag.write_transform("/tf", T, "odom", "base_link", STAMP0)
+    with AnyReader([path]) as raw:
+        msgs = {c.topic: [raw.deserialize(r, c.msgtype) for _, _, r in raw.messages([c])] for c in raw.connections}
+        types = {c.topic: c.msgtype for c in raw.connections}
+    assert types == {"/odom": "nav_msgs/msg/Odometry", "/tf": "tf2_msgs/msg/TFMessage"}
+    first, second = msgs["/odom"]
+    t = first.twist.twist
+    assert [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z] == [0.0] * 6
+    np.testing.assert_array_equal(np.reshape(first.twist.covariance, (6, 6)), np.eye(6) * UNKNOWN_VARIANCE)
+    t = second.twist.twist
+    np.testing.assert_allclose([t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z],
+                               [1, 2, 3, 0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(np.reshape(second.twist.covariance, (6, 6)), twist_cov)
+    np.testing.assert_array_equal(np.reshape(second.pose.covariance, (6, 6)), cov)
+    (tf,) = msgs["/tf"][0].transforms
+    assert (tf.header.frame_id, tf.child_frame_id) == ("odom", "base_link")
+    assert (tf.header.stamp.sec, tf.header.stamp.nanosec) == divmod(STAMP0, 1_000_000_000)
+    q, p = tf.transform.rotation, tf.transform.translation
+    back = np.eye(4)
+    back[:3, :3], back[:3, 3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), [p.x, p.y, p.z]
+    np.testing.assert_allclose(back, T, atol=1e-12)
+
+
+def test_messages_copy_unchanged(tmp_path):
+    """BagReader.messages + BagWriter.write_message: same topic, type, header, content and bag time."""
+    src, dst = tmp_path / "src.mcap", tmp_path / "dst.mcap"
+    with BagWriter(src) as bag:
+        for i, pose in enumerate([_pose(0.1 * i, (i, 0, 0)) for i in range(3)]):
+            bag.write_cloud("/points", np.ones((5, 3)), "lidar", STAMP0 + i)
+            bag.write_pose("/ground_truth", pose, "world", STAMP0 + i)
+        bag.write_transform("/tf_static", _pose(0.0, (0, 0, 1.5)), "base_link", "lidar", STAMP0)
+    with BagReader(src) as reader:
+        copied = [(topic, *m) for topic in ("/ground_truth", "/tf_static", "/absent") for m in reader.messages(topic)]
+        with BagWriter(dst) as bag:
+            for topic, bag_ns, msgtype, msg in copied:
+                bag.write_message(topic, msgtype, msg, bag_ns)
+    with AnyReader([src]) as a, AnyReader([dst]) as b:
+        def dump(reader):
+            return sorted((c.topic, c.msgtype, t, bytes(r)) for c, t, r in reader.messages()
+                          if c.topic != "/points")
+        assert dump(a) == dump(b) and len(dump(b)) == 4  # byte for byte

@@ -236,12 +236,8 @@ def test_node_gets_the_params_file_first_then_the_argument_overrides():
 
 def _node_parameter_defaults() -> dict:
     """align_node's parameters, name -> default."""
-    try:  # the schema module, no rclpy needed
-        from cemnet_ros.ros.node_config import node_parameters
-    except ImportError:  # before the schema: the table in align_node, which imports rclpy
-        pytest.importorskip("rclpy")
-        from cemnet_ros.ros.align_node import PARAMETERS
-        return {name: spec[0] for name, spec in PARAMETERS.items()}
+    from cemnet_ros.ros.node_config import node_parameters  # the schema: no rclpy needed
+
     return {name: parameter.default for name, parameter in node_parameters().items()}
 
 

@@ -34,9 +34,9 @@ from cemnet_ros.pipeline.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.covariance import (Conditioning, covariance_from_hessian, flat_covariance,
                                             keep_prediction_along)
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.deskew import deskew
+from cemnet_ros.pipeline.deskew import deskew, se3_exp, se3_log
 from cemnet_ros.pipeline.health import HealthMonitor, Signals, disagreement
-from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
+from cemnet_ros.pipeline.motion import ConstantVelocity
 from cemnet_ros.pipeline.preprocess import (crop_range, finite_points, robust_radius,
                                             subsample, voxel_downsample)
 from cemnet_ros.pipeline import preprocess, refine
@@ -169,6 +169,7 @@ class ScanAligner:
         self._odom_fix: Optional[np.ndarray] = None  # deskewing: T_odom_reference0 (odom: the first scan's stamp)
         self._skewed_input: Optional[tuple[np.ndarray, np.ndarray]] = None  # this scan, timed but not deskewed
         self._inserted: Optional[list] = None  # the map's scans while none could be deskewed (None: not tracked)
+        self._last_dt_ns = 0  # the motion model's last time step
 
     def request_recovery(self) -> None:
         """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
@@ -184,7 +185,11 @@ class ScanAligner:
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
         points, offset_ns = self._deskewed(points, point_times, stamp_ns)
-        return self._at_stamp(self._process_at(points, stamp_ns + offset_ns, start), stamp_ns, offset_ns)
+        before = self._last_stamp
+        step = self._process_at(points, stamp_ns + offset_ns, start)
+        if before is not None and self._last_stamp != before:
+            self._last_dt_ns = self._last_stamp - before  # the motion model's last time step
+        return self._at_stamp(step, stamp_ns, offset_ns)
 
     def _process_at(self, points: np.ndarray, stamp_ns: int, start: float) -> AlignmentStep:
         """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :meth:`_deskewed`)."""
@@ -337,40 +342,43 @@ class ScanAligner:
         if point_times is None:
             return points, offset_ns
         times = np.asarray(point_times, dtype=np.float64) - offset_ns * 1e-9
-        if (not self._motion.has_velocity or not self._period_ns or self._last_stamp is None
-                or stamp_ns + offset_ns <= self._last_stamp):  # no velocity yet, a duplicate or a restart
+        twist = self._velocity()
+        if twist is None or stamp_ns + offset_ns <= self._last_stamp:  # no velocity yet, a duplicate or a restart
             self._skewed_input = (np.asarray(points), times)
             return points, offset_ns
         if self._inserted:
-            self._redeskew_map()
+            self._redeskew_map(twist)
         self._inserted = None
-        return deskew(points, times, self._motion_over(self._period_ns), self._period_ns * 1e-9), offset_ns
+        return deskew(points, times, None, 0.0, twist=twist), offset_ns
 
     def _note_inserted(self, pose: np.ndarray) -> None:
-        """Remember a scan that went into the map undeskewed (and where), for :meth:`_redeskew_map`."""
-        if self._inserted is not None:
-            self._inserted.append(None if self._skewed_input is None else (*self._skewed_input, pose.copy()))
+        """Remember a scan that went into the map undeskewed (and where), for :meth:`_redeskew_map`.
 
-    def _redeskew_map(self) -> None:
-        """The map rebuilt from its scans deskewed at the first velocity known (only if they all had times)."""
-        if any(item is None for item in self._inserted):
-            return
-        T_period, period_s = self._motion_over(self._period_ns), self._period_ns * 1e-9
+        A scan without times (or deskewed already) ends the tracking: the map cannot be rebuilt without it.
+        """
+        if self._inserted is not None:
+            if self._skewed_input is None:
+                self._inserted = None
+            else:
+                self._inserted.append((*self._skewed_input, pose.copy()))
+
+    def _redeskew_map(self, twist: np.ndarray) -> None:
+        """The map rebuilt from its scans (all of them went in undeskewed) deskewed at the first velocity known."""
         rebuilt = self._new_map()
         for points, times, pose in self._inserted:
             try:
-                dense = self._preprocess(deskew(points, times, T_period, period_s)).dense
+                dense = self._preprocess(deskew(points, times, None, 0.0, twist=twist)).dense
             except ScanRejected:
                 return  # keep the map as it is
             rebuilt.update(apply_transform(pose, dense), pose[:3, 3])
         self._map = rebuilt
 
-    def _motion_over(self, delta_ns: int) -> np.ndarray:
-        """The motion over ``delta_ns`` after the last scan at the model's velocity (identity without one)."""
-        if not self._motion.has_velocity or not self._period_ns:
-            return np.eye(4)
-        period = self._motion.predict_relative(self._last_stamp + self._period_ns)  # one period: never capped
-        return se3_power(period, delta_ns / self._period_ns)
+    def _velocity(self) -> Optional[np.ndarray]:
+        """The motion model's twist (6,) per second: its last motion over its last time step (None: none yet)."""
+        if not self._motion.has_velocity or self._last_dt_ns <= 0 or self._last_stamp is None:
+            return None
+        last_motion = self._motion.predict_relative(self._last_stamp + self._last_dt_ns)  # ratio 1: as recorded
+        return se3_log(last_motion) / (self._last_dt_ns * 1e-9)
 
     def _at_stamp(self, step: AlignmentStep, stamp_ns: int, offset_ns: int) -> AlignmentStep:
         """The step as published: the pose at ``stamp_ns`` (the reference time is ``offset_ns`` later).
@@ -379,7 +387,8 @@ class ScanAligner:
         placed by the first velocity known (none is known at the first scan itself).
         """
         if offset_ns:
-            to_stamp = self._motion_over(-offset_ns)
+            twist = self._velocity()
+            to_stamp = np.eye(4) if twist is None else se3_exp(twist * (-offset_ns * 1e-9))
             if self._odom_fix is None and self._motion.has_velocity:
                 self._odom_fix = np.linalg.inv(to_stamp)
             step.pose = (self._odom_fix if self._odom_fix is not None else np.eye(4)) @ step.pose @ to_stamp

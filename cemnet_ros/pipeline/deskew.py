@@ -2,25 +2,30 @@
 
 A spinning LiDAR measures its points over a sweep (~0.1 s) while it moves: point i is expressed in the sensor
 frame at its own time t_i, so a scan taken at 15 m/s is smeared by 1.5 m. :func:`deskew` moves every point into
-the sensor frame at the cloud's stamp, assuming a constant body velocity (the motion model's) over the sweep.
+the sensor frame at one instant, assuming a constant body velocity (the motion model's) over the sweep.
 
 **Time convention** (everywhere in the package): per-point times are float64 **seconds relative to the cloud's
 header stamp** (negative = before it). :func:`normalize_point_times` turns a raw PointCloud2 time field into it.
 
-**Target frame: the stamp**, not the sweep's middle (KISS-ICP's older choice) or end (its newer one). The pose
-the pipeline estimates is published with the cloud's header stamp, and the motion model's velocity is measured
-between stamps; deskewing to the stamp makes the scan, the pose, the TF and the model agree on one instant
-whatever the driver's stamping policy. The relative time fields of the ROS drivers are already offsets from the
-header stamp (Ouster ``t``: from the first column, which the stamp is; Velodyne ``time``: negative offsets when
-the driver stamps with the last packet, its default), so they are used as they are, never min-max normalised
-to [0, 1]: that normalisation drops the sweep's real duration and presumes where the stamp lies.
+**No normalisation, no guess of where the stamp lies.** The relative time fields of the ROS drivers are offsets
+from the header stamp already (Ouster ``t``: ns from the first column, which the stamp is; Velodyne ``time``: s,
+negative when the driver stamps with the last packet, its default), and absolute fields (Hesai, Livox) are made
+relative to it; so wherever a driver puts its stamp, the times say it. KISS-ICP instead min-max normalises them to
+[0, 1] and deskews to a fixed fraction (0.5 once, 1.0 now): that drops the sweep's real duration (the velocity is
+per stamp interval, which need not be the sweep's) and presumes the stamp's place in the sweep.
+
+:func:`deskew` moves the points to the instant their times are relative to (the stamp, or any reference: shift
+the times). The pipeline (:meth:`ScanAligner._deskewed <cemnet_ros.pipeline.aligner.ScanAligner>`) deskews to
+the sweep's middle, where a registration pins the pose whatever the velocity used, and publishes the pose at
+the stamp.
 """
 from __future__ import annotations
 
 from typing import Optional
 
 import numpy as np
-from scipy.linalg import logm
+
+from cemnet_ros.core.geometry import so3_log
 
 # Time field names, in order of preference when a cloud has several (relative offsets first: no precision loss).
 TIME_FIELDS = ("t", "time", "offset_time", "timestamp")
@@ -80,9 +85,35 @@ def normalize_point_times(raw: np.ndarray, stamp_ns: int, name: str = "time",
 
 
 def se3_log(transform: np.ndarray) -> np.ndarray:
-    """Twist (6,) [rho, omega] of a rigid transform, ``transform = exp(twist^)``: the log motion.se3_power uses."""
-    log = np.real(logm(np.asarray(transform, dtype=np.float64)))
-    return np.array([log[0, 3], log[1, 3], log[2, 3], log[2, 1], log[0, 2], log[1, 0]])
+    """Twist (6,) [rho, omega] of a rigid transform, ``transform = exp(twist^)`` (closed form).
+
+    Not scipy's ``logm``: with a multithreaded BLAS on a busy machine one call can take tens of milliseconds.
+    """
+    T = np.asarray(transform, dtype=np.float64)
+    omega = so3_log(T[:3, :3])
+    theta = float(np.linalg.norm(omega))
+    W = _hat3(omega)
+    if theta < 1e-2:  # the closed form cancels as 1 / theta^2: its Taylor series is exact to 1e-18 here
+        c = 1.0 / 12.0 + theta ** 2 / 720.0 + theta ** 4 / 30240.0
+    else:
+        c = (1.0 - theta * np.sin(theta) / (2.0 * (1.0 - np.cos(theta)))) / (theta * theta)
+    rho = (np.eye(3) - 0.5 * W + c * (W @ W)) @ T[:3, 3]  # V(omega)^-1 t
+    return np.r_[rho, omega]
+
+
+def se3_exp(twist: np.ndarray) -> np.ndarray:
+    """4x4 rigid transform exp(twist^) of a twist (6,) [rho, omega] (closed form; inverse of :func:`se3_log`)."""
+    xi = np.asarray(twist, dtype=np.float64)
+    W = _hat3(xi[3:])
+    a, b, c = (float(k[0]) for k in _exp_coefficients(np.array([np.linalg.norm(xi[3:])])))
+    out = np.eye(4)
+    out[:3, :3] = np.eye(3) + a * W + b * (W @ W)
+    out[:3, 3] = (np.eye(3) + b * W + c * (W @ W)) @ xi[:3]
+    return out
+
+
+def _hat3(w: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
 def deskew(points: np.ndarray, times: np.ndarray, T_prev_curr: np.ndarray, dt: float,

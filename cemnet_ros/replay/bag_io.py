@@ -1,5 +1,9 @@
 """Read point clouds + ground truth from rosbag2 bags and write result bags, with ``rosbags`` (no rclpy/DDS).
 
+The writer fills the rosbags (ROS 2 Jazzy) types of what align_node publishes: PoseStamped, nav_msgs/Odometry
+with twist and covariances, tf2_msgs/TFMessage and PointCloud2; messages read from another bag (e.g. its
+ground truth) are copied with :meth:`BagWriter.write_message`.
+
 Reading accepts a rosbag2 directory (mcap or sqlite3 storage, with metadata.yaml) or a bare ``.mcap``/``.db3``
 file. Writing produces one ``.mcap`` file (zstd chunks), built in a temporary directory beside the target and
 moved into place only when complete, so a crash never leaves a half-written bag under the final name.
@@ -19,12 +23,15 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
+from cemnet_ros.pipeline.odometry_output import UNKNOWN_VARIANCE  # align_node's unmeasured twist
 from cemnet_ros.pointcloud2 import CloudError, CloudReport, decode_xyz, make_pointcloud2
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 ODOMETRY = "nav_msgs/msg/Odometry"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
 GROUND_TRUTH_TOPIC = "/ground_truth"
 _GT_TYPES = (POSE_STAMPED, ODOMETRY)
 
@@ -116,6 +123,11 @@ class BagWriter:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             self._writer = None
 
+    def write_message(self, topic: str, msgtype: str, msg, stamp_ns: int) -> None:
+        """Any message of a type in the Jazzy typestore, e.g. one read from another bag (same content and type);
+        ``stamp_ns`` is the bag (log) time."""
+        self._write(topic, msgtype, msg, stamp_ns)
+
     def _write(self, topic: str, msgtype: str, msg, stamp_ns: int) -> None:
         if self._writer is None:
             raise RuntimeError("BagWriter is not open (use it as a context manager)")
@@ -135,25 +147,47 @@ class BagWriter:
         self._write(topic, POINTCLOUD2, msg, stamp_ns)
 
     def write_pose(self, topic: str, transform: np.ndarray, frame_id: str, stamp_ns: int) -> None:
-        """PoseStamped: pose of the sensor (4x4 ``transform``) in ``frame_id``."""
+        """PoseStamped: a pose (4x4 ``transform``) in ``frame_id``."""
         msg = TYPESTORE.types[POSE_STAMPED](header=_header(frame_id, stamp_ns), pose=matrix_to_pose_msg(transform))
         self._write(topic, POSE_STAMPED, msg, stamp_ns)
 
     def write_odometry(self, topic: str, transform: np.ndarray, covariance: np.ndarray, frame_id: str,
-                       child_frame_id: str, stamp_ns: int) -> None:
-        """nav_msgs/Odometry with the pose covariance (6x6, ROS order x,y,z,roll,pitch,yaw); zero twist."""
+                       child_frame_id: str, stamp_ns: int, *, linear: Optional[np.ndarray] = None,
+                       angular: Optional[np.ndarray] = None, twist_covariance: Optional[np.ndarray] = None) -> None:
+        """nav_msgs/Odometry: the pose of ``child_frame_id`` in ``frame_id`` with its covariance (6x6, ROS order
+        x,y,z,roll,pitch,yaw) and the twist in ``child_frame_id`` (REP-105). Without ``twist_covariance`` the
+        twist is unknown: zero, with UNKNOWN_VARIANCE on the covariance diagonal (as align_node's first step)."""
         types = TYPESTORE.types
         cov = np.asarray(covariance, dtype=np.float64).reshape(36)
         vec3 = types["geometry_msgs/msg/Vector3"]
-        twist = types["geometry_msgs/msg/Twist"](linear=vec3(x=0.0, y=0.0, z=0.0), angular=vec3(x=0.0, y=0.0, z=0.0))
+
+        def vector(v) -> object:
+            x, y, z = (0.0, 0.0, 0.0) if v is None else (float(c) for c in np.asarray(v, dtype=np.float64))
+            return vec3(x=x, y=y, z=z)
+
+        if twist_covariance is None:
+            linear, angular, twist_covariance = None, None, np.eye(6) * UNKNOWN_VARIANCE
+        twist = types["geometry_msgs/msg/Twist"](linear=vector(linear), angular=vector(angular))
         msg = types[ODOMETRY](
             header=_header(frame_id, stamp_ns),
             child_frame_id=child_frame_id,
             pose=types["geometry_msgs/msg/PoseWithCovariance"](pose=matrix_to_pose_msg(transform), covariance=cov),
-            # The twist is not estimated: zero, with -1 on the covariance diagonal to mark it unknown.
-            twist=types["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=-np.eye(6).reshape(36)),
+            twist=types["geometry_msgs/msg/TwistWithCovariance"](
+                twist=twist, covariance=np.asarray(twist_covariance, dtype=np.float64).reshape(36).copy()),
         )
         self._write(topic, ODOMETRY, msg, stamp_ns)
+
+    def write_transform(self, topic: str, transform: np.ndarray, parent_frame: str, child_frame: str,
+                        stamp_ns: int) -> None:
+        """tf2_msgs/TFMessage with one TransformStamped: ``child_frame`` in ``parent_frame`` (4x4)."""
+        types = TYPESTORE.types
+        pose = matrix_to_pose_msg(transform)
+        p = pose.position
+        tf = types["geometry_msgs/msg/TransformStamped"](
+            header=_header(parent_frame, stamp_ns), child_frame_id=child_frame,
+            transform=types["geometry_msgs/msg/Transform"](
+                translation=types["geometry_msgs/msg/Vector3"](x=p.x, y=p.y, z=p.z), rotation=pose.orientation))
+        self._write(topic, TF_MESSAGE, types[TF_MESSAGE](transforms=[tf]), stamp_ns)
 
 
 # ---------------------------------------------------------------------------------------------- reading
@@ -233,6 +267,15 @@ class BagReader:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def messages(self, topic: str) -> Iterator[tuple[int, str, object]]:
+        """(bag time ns, message type, deserialized message) of every message on ``topic``, in bag order
+        (nothing when the bag has no such topic); e.g. to copy it into another bag."""
+        if topic not in self.info.topics:
+            return
+        msgtype = self.info.topics[topic]
+        for bag_ns, msg in self._messages(topic):
+            yield bag_ns, msgtype, msg
 
     def _messages(self, topic: str) -> Iterator[tuple[int, object]]:
         conns = [c for c in self._reader.connections if c.topic == topic]

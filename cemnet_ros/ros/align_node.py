@@ -30,8 +30,9 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
-from cemnet_ros.pipeline.extrinsic import BaseFrame, in_body_axes, pose_from_xyz_rpy
+from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.pipeline.node_status import NodeStatus
+from cemnet_ros.pipeline.odometry_output import odometry_output
 from cemnet_ros.pipeline.pairing import PairMatcher
 from cemnet_ros.pipeline.worker import BoundedWorker
 from cemnet_ros.pointcloud2 import CloudError, decode_point_times, decode_xyz, make_pointcloud2
@@ -303,29 +304,16 @@ class AlignNode(Node):
         self._extrinsic_from_tf = False
         self.get_logger().info(f"extrinsic {self._cfg.base_frame} <- {sensor_frame} from TF")
 
-    def _covariances(self, step: Any, T_odom_base: np.ndarray, dt_s: Optional[float]) -> tuple:
-        """(pose covariance, twist covariance), ROS order, about the base (docs/node.md)."""
-        cfg = self._cfg
-        if cfg.covariance_mode == "fixed":
-            pose = np.diag([cfg.fixed_position_variance] * 3 + [cfg.fixed_orientation_variance] * 3)
-            if not step.accepted:
-                pose = pose * self._pipeline_config.health.covariance_inflation
-        else:
-            pose = self._base.covariance(step.covariance, step.pose)
-        twist = in_body_axes(pose, T_odom_base) / dt_s ** 2 if dt_s else pose
-        return pose, twist
-
     def _publish(self, step: Any, source: Scan, frame: str, dt_s: Optional[float]) -> None:
         cfg = self._cfg
-        T_odom_base = self._base.pose(step.pose)
-        relative = None if step.relative is None else self._base.relative(step.relative)
-        pose_cov, twist_cov = self._covariances(step, T_odom_base, dt_s)
+        # The numbers (base pose, motion, twist, covariances) are cemnet-replay's too: pipeline/odometry_output.py.
+        out = odometry_output(step, self._base, dt_s, cfg, self._pipeline_config.health.covariance_inflation)
+        T_odom_base = out.T_odom_base
         pose = PoseStamped()
         pose.header.stamp, pose.header.frame_id = source.msg.header.stamp, frame
         messages.fill_pose(pose.pose, T_odom_base)
         self._pose_pub.publish(pose)
-        self._odom_pub.publish(messages.odometry(pose.header, cfg.base_frame, T_odom_base, pose_cov, relative,
-                                                 dt_s, twist_cov))
+        self._odom_pub.publish(messages.odometry(pose.header, cfg.base_frame, out))
         if self._cloud_pub is not None:
             T_odom_sensor = T_odom_base @ self._base.T_base_sensor
             if cfg.aligned_cloud_voxel > 0:

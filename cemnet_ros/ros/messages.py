@@ -1,7 +1,7 @@
 """Filling the node's output messages from a step's base-frame pose, motion and covariance."""
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import TransformStamped
@@ -9,9 +9,8 @@ from nav_msgs.msg import Odometry
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import PointCloud2
 
-from cemnet_ros.pointcloud2 import _as_bytes
-
-UNKNOWN_VARIANCE = 1e6  # a twist nobody measured yet (the first scan): huge, never zero
+from cemnet_ros.pipeline.odometry_output import OdometryOutput
+from cemnet_ros.pointcloud2 import as_bytes
 
 
 def fill_pose(pose_msg: Any, T: np.ndarray) -> None:
@@ -22,23 +21,17 @@ def fill_pose(pose_msg: Any, T: np.ndarray) -> None:
     pose_msg.orientation.z, pose_msg.orientation.w = float(qz), float(qw)
 
 
-def odometry(header: Any, child_frame: str, T_odom_base: np.ndarray, pose_covariance: np.ndarray,
-             T_prev_curr: Optional[np.ndarray], dt_s: Optional[float], twist_covariance: np.ndarray) -> Odometry:
-    """nav_msgs/Odometry: the pose in the header's frame, the twist in ``child_frame`` (REP-105)."""
+def odometry(header: Any, child_frame: str, out: OdometryOutput) -> Odometry:
+    """nav_msgs/Odometry of one step: the pose in the header's frame, the twist in ``child_frame`` (REP-105)."""
     msg = Odometry()
     msg.header = header
     msg.child_frame_id = child_frame
-    fill_pose(msg.pose.pose, T_odom_base)
-    msg.pose.covariance = [float(v) for v in pose_covariance.reshape(-1)]
-    if T_prev_curr is not None and dt_s:
-        linear = T_prev_curr[:3, 3] / dt_s
-        angular = Rotation.from_matrix(T_prev_curr[:3, :3]).as_rotvec() / dt_s
-        t = msg.twist.twist
-        t.linear.x, t.linear.y, t.linear.z = (float(v) for v in linear)
-        t.angular.x, t.angular.y, t.angular.z = (float(v) for v in angular)
-        msg.twist.covariance = [float(v) for v in twist_covariance.reshape(-1)]
-    else:
-        msg.twist.covariance = [float(v) for v in (np.eye(6) * UNKNOWN_VARIANCE).reshape(-1)]
+    fill_pose(msg.pose.pose, out.T_odom_base)
+    msg.pose.covariance = [float(v) for v in out.pose_covariance.reshape(-1)]
+    t = msg.twist.twist
+    t.linear.x, t.linear.y, t.linear.z = (float(v) for v in out.linear)
+    t.angular.x, t.angular.y, t.angular.z = (float(v) for v in out.angular)
+    msg.twist.covariance = [float(v) for v in out.twist_covariance.reshape(-1)]
     return msg
 
 
@@ -57,7 +50,7 @@ def transform(header: Any, child_frame: str, T_parent_child: np.ndarray) -> Tran
 
 def transformed_cloud(cloud: PointCloud2, T: np.ndarray, frame_id: str) -> PointCloud2:
     """A copy of ``cloud`` with x, y, z moved by ``T`` and every other field kept (float32/64 coordinates)."""
-    data = _as_bytes(cloud.data).copy()
+    data = as_bytes(cloud.data).copy()
     n, step, row = int(cloud.height) * int(cloud.width), int(cloud.point_step), int(cloud.row_step)
     endian = ">" if cloud.is_bigendian else "<"
     fields = {f.name: f for f in cloud.fields}
