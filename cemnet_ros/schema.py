@@ -163,20 +163,21 @@ def _yaml_value(value: Any) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser, params: Mapping[str, Parameter], title: str) -> None:
-    """One ``--<dotted.name>`` flag per parameter (absent flags keep the config's value)."""
+    """One ``--<dotted.name>`` flag per parameter, also spelt with hyphens (absent flags keep the config's value)."""
     group = parser.add_argument_group(title)
     for p in params.values():
         help_text = p.describe().replace("%", "%%")  # argparse formats help strings
         kwargs: dict[str, Any] = {"dest": p.name, "default": argparse.SUPPRESS, "help": help_text}
         if p.choices:
             kwargs.update(type=p.kind, choices=p.choices)
-        elif p.kind is bool:
-            kwargs.update(type=_boolean, metavar="{true,false}")
+        elif p.kind is bool:  # "--allow_pickle" alone means true
+            kwargs.update(type=_boolean, nargs="?", const=True, metavar="{true,false}")
         elif p.kind is tuple:
             kwargs.update(type=float, nargs=len(p.default), metavar="X")
         else:
             kwargs.update(type=p.kind, metavar=p.kind.__name__.upper())
-        group.add_argument("--" + p.name, **kwargs)
+        flags = dict.fromkeys(["--" + p.name, "--" + p.name.replace("_", "-")])  # --allow_pickle, --allow-pickle
+        group.add_argument(*flags, **kwargs)
 
 
 def parsed_overrides(args: argparse.Namespace, params: Mapping[str, Parameter]) -> dict[str, Any]:

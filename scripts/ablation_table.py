@@ -33,7 +33,7 @@ def variants(own: str | None, official: Path | None) -> list[tuple[str, list[str
     rows = [(f"CEMNet, {name}", flags) for name, flags in weight_sets]
     rows.append(("no sampling network, prior N(0, I)", ["--prior", "identity"]))
     rows += [(f"sampling network alone (mu0), {name}", flags + ["--mode", "network"]) for name, flags in weight_sets]
-    rows += [(f"CEM without future reward (M = 0), {name}", flags + ["--n-fused-iters", "0"])
+    rows += [(f"CEM without future reward (M = 0), {name}", flags + ["--cem.n_fused_iters", "0"])
              for name, flags in weight_sets]
     return rows
 

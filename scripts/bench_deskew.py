@@ -93,7 +93,8 @@ def run_drive(sequence: SkewedSequence, deskew: bool, label: str, with_times: bo
         rpe = relative_pose_errors(poses, truth)
         end = (np.linalg.inv(poses[0]) @ poses[-1])[:3, 3] - (np.linalg.inv(truth[0]) @ truth[-1])[:3, 3]
         out.update(ate_m=ate_first_pose(poses, truth), ate_aligned_m=absolute_trajectory_error(poses, truth).rmse,
-                   rpe_trans_mean_m=float(rpe.trans_errors.mean()), rpe_trans_median_m=float(np.median(rpe.trans_errors)),
+                   rpe_trans_mean_m=float(rpe.trans_errors.mean()),
+                   rpe_trans_median_m=float(np.median(rpe.trans_errors)),
                    rpe_rot_mean_deg=float(rpe.rot_errors_deg.mean()), end_error_m=float(np.linalg.norm(end)))
     return out
 

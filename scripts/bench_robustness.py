@@ -38,8 +38,15 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
     sys.path.insert(0, str(REPO))
 
 from cemnet_ros.data.kitti import kitti_scans  # noqa: E402
-from cemnet_ros.data.scenes import (COURTYARD_BOUNDS, LidarModel, corridor_scene, courtyard_scene,  # noqa: E402
-                                    inside_obstacle, lidar_scan, random_sensor_pose)
+from cemnet_ros.data.scenes import (  # noqa: E402
+    COURTYARD_BOUNDS,
+    LidarModel,
+    corridor_scene,
+    courtyard_scene,
+    inside_obstacle,
+    lidar_scan,
+    random_sensor_pose,
+)
 from cemnet_ros.data.shared import shared_dir  # noqa: E402
 from cemnet_ros.io.atomic import atomic_write_text  # noqa: E402
 from cemnet_ros.replay.trajectory import rotation_angle_deg  # noqa: E402

@@ -30,6 +30,7 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 
 from cemnet_ros.data.shared import shared_dir  # noqa: E402
 from cemnet_ros.pipeline.worker import BoundedWorker  # noqa: E402
+from cemnet_ros.ros.node_config import NodeConfig  # noqa: E402
 
 KITTI = (shared_dir() or REPO.parent / "shared") / "data" / "kitti_sample" / "velodyne"
 
@@ -160,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=30.0, help="seconds of streaming per pipeline")
     parser.add_argument("--rate", type=float, default=10.0, help="scan rate in Hz (KITTI: 10)")
-    parser.add_argument("--queue-size", type=int, default=5, help="worker queue bound (align_node default: 5)")
+    parser.add_argument("--queue-size", type=int, default=NodeConfig().queue_size,
+                        help="worker queue bound (default: align_node's)")
     parser.add_argument("--source", choices=("auto", "kitti", "synthetic"), default="auto")
     parser.add_argument("--no-baseline", action="store_true", help="skip the plain-ICP baseline stream")
     args = parser.parse_args(argv)

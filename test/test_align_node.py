@@ -25,11 +25,11 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from street_scene import make_transform, make_world  # noqa: E402
 
 from cemnet_ros.pointcloud2 import decode_xyz, make_pointcloud2  # noqa: E402
-from cemnet_ros.ros.align_node import TFMessage, AlignNode  # noqa: E402
+from cemnet_ros.ros.align_node import AlignNode, TFMessage  # noqa: E402
 from cemnet_ros.ros.node_config import node_parameters, params_file_text  # noqa: E402
-from street_scene import make_transform, make_world  # noqa: E402
 
 pytestmark = pytest.mark.dds
 
@@ -89,6 +89,7 @@ class Harness:
         self.node = AlignNode(context=context, namespace=namespace, parameter_overrides=params)
         self.probe = rclpy.create_node("probe", namespace=namespace, context=context)
         self.odometry, self.poses, self.clouds, self.diagnostics, self.logs, self.tfs = [], [], [], [], [], []
+        self.namespace = namespace
         ns = f"/{namespace}/align_node"
         self.probe.create_subscription(Odometry, f"{ns}/odometry", self.odometry.append, 50)
         self.probe.create_subscription(PoseStamped, f"{ns}/pose", self.poses.append, 50)
@@ -278,6 +279,44 @@ def test_reset_restarts_the_map_and_keeps_odom_continuous(harness_factory):
     assert trans_err < 0.02
 
 
+def test_set_pose_local_map_and_save_map(harness_factory, tmp_path, monkeypatch):
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    from cemnet_ros.io.pointcloud_files import read_points
+
+    monkeypatch.chdir(tmp_path)  # ~/save_map writes into the working directory
+    h = harness_factory({"local_map_period": 0.2})
+    maps = []
+    h.probe.create_subscription(PointCloud2, f"/{h.namespace}/align_node/local_map", maps.append,
+                                QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                           durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    for k in range(2):
+        h.send(scan_msg(k), timeout=FIRST_TIMEOUT)
+    assert wait_for(lambda: maps, 10) and maps[-1].header.frame_id == "odom" and maps[-1].width > 1000
+    save = h.probe.create_client(Trigger, f"/{h.namespace}/align_node/save_map")
+    assert save.wait_for_service(timeout_sec=5)
+    future = save.call_async(Trigger.Request())
+    assert wait_for(future.done, 10) and future.result().success, future.result()
+    saved = sorted(tmp_path.glob("cemnet_map_*.ply"))
+    assert len(saved) == 1 and len(read_points(saved[0])) > 1000
+    # set_pose: the next scan starts a new map with the base at the given pose.
+    target = make_transform(yaw=0.3, t=(10.0, -4.0, 0.0))
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = "odom"
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in target[:3, 3])
+    q.x, q.y, q.z, q.w = (float(v) for v in Rotation.from_matrix(target[:3, :3]).as_quat())
+    setter = h.probe.create_publisher(PoseWithCovarianceStamped, f"/{h.namespace}/align_node/set_pose", 10)
+    assert wait_for(lambda: setter.get_subscription_count() > 0, 10)
+    setter.publish(msg)
+    assert wait_for(lambda: any("set_pose" in log.msg for log in h.logs), 10)
+    odom = h.send(scan_msg(2))
+    np.testing.assert_allclose(pose_of(odom), target, atol=1e-6)
+    odom = h.send(scan_msg(3))  # tracking goes on from there
+    trans_err, _ = pose_error(np.linalg.inv(POSES[2]) @ POSES[3], np.linalg.inv(target) @ pose_of(odom))
+    assert trans_err < 0.02
+
+
 def test_scans_sent_from_the_start_are_processed_or_reported(harness_factory):
     """The subscription exists before the engine has loaded; every early scan is queued or counted as dropped."""
     h = harness_factory({"queue_size": 3})
@@ -326,11 +365,12 @@ def test_tf_is_received_by_another_node_and_can_be_inverted(harness_factory):
 
 def test_odometry_is_the_base_frames_motion_given_an_extrinsic(harness_factory):
     """base_to_sensor set: the published pose is T_base_sensor T_sensor0_sensor inv(T_base_sensor)."""
+    from rosbags.typesys import Stores, get_typestore
+
     from cemnet_ros.pipeline.aligner import ScanAligner
     from cemnet_ros.pipeline.config import AlignerConfig
     from cemnet_ros.pipeline.extrinsic import pose_from_xyz_rpy
     from cemnet_ros.schema import build
-    from rosbags.typesys import Stores, get_typestore
 
     kitti = REPO / "bags" / "kitti_00_6scans.mcap"
     if not kitti.is_file():

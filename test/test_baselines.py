@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from cemnet_ros.data.shapes import bracket_shape
 from cemnet_ros.eval import baselines
 from cemnet_ros.eval.baselines import BaselineUnavailable, ICPConfig, fpfh_ransac, icp, kabsch, open3d_available
 from cemnet_ros.eval.metrics import pair_metrics
 from cemnet_ros.eval.protocol import ProtocolConfig, make_pair
-from cemnet_ros.data.shapes import bracket_shape
 
 SHAPE = bracket_shape(1024, seed=1).astype(np.float64)
 

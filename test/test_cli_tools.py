@@ -14,7 +14,7 @@ from cemnet_ros.core.network import SamplingNetwork  # noqa: E402
 from cemnet_ros.tools import bench_cli, eval_cli, register_cli  # noqa: E402
 from cemnet_ros.tools.register_cli import resolve_scale  # noqa: E402
 
-SMALL_CEM = ["--n-candidates", "100", "--n-iters", "3"]
+SMALL_CEM = ["--cem.n_candidates", "100", "--cem.n_iters", "3"]
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +67,7 @@ def test_eval_network_mode_unseen_identity(shapes_npz, random_weights, tmp_path,
 @pytest.mark.parametrize("extra, message", [
     (["--methods", "cemnet,magic"], "unknown"),
     (["--weights", "/nonexistent/w.npz"], "not found"),
-    (["--n-candidates", "1"], "n_candidates"),
+    (["--cem.n_candidates", "1"], "n_candidates"),
     (["--limit", "0"], ">= 1"),
 ])
 def test_eval_bad_arguments_exit_nonzero(shapes_npz, extra, message, capsys):
@@ -111,7 +111,7 @@ def test_register_two_files_recovers_transform(tmp_path, capsys):
     t = np.array([0.2, -0.1, 0.15])
     write_ply(tmp_path / "src.ply", shape[:768])
     np.save(tmp_path / "tgt.npy", shape[256:] @ r.T + t)
-    assert register_cli.main([str(tmp_path / "src.ply"), str(tmp_path / "tgt.npy"), "--n-candidates", "300"]) == 0
+    assert register_cli.main([str(tmp_path / "src.ply"), str(tmp_path / "tgt.npy"), "--cem.n_candidates", "300"]) == 0
     out = capsys.readouterr().out
     transform = _parse_matrix(out)
     assert transform.shape == (4, 4) and "fitness" in out and "sigma" in out

@@ -1,11 +1,10 @@
 import numpy as np
 import pytest
 import torch
+from shared_data import OFFICIAL_DIR, needs_shared
 
 from cemnet_ros.core.checkpoint import DEFAULT_WEIGHTS, CheckpointError, load_network, load_weights, save_weights
 from cemnet_ros.core.network import SamplingNetwork
-
-from shared_data import OFFICIAL_DIR, needs_shared
 
 
 def test_safe_format_round_trip(tmp_path):

@@ -7,8 +7,8 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.eval.protocol import ProtocolConfig, load_shapes, make_pair, protocol_pairs
 from cemnet_ros.data.shapes import bracket_shape
+from cemnet_ros.eval.protocol import ProtocolConfig, load_shapes, make_pair, protocol_pairs
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 MODELNET = SHARED / "data" / "modelnet40_subset.npz"

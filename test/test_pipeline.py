@@ -7,15 +7,21 @@ import time
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from street_scene import make_transform, make_world
 
 from cemnet_ros.core import CEMConfig, RegistrationConfig
 from cemnet_ros.pipeline.aligner import ScanAligner, ScanRejected
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
 from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
-from cemnet_ros.pipeline.preprocess import (crop_range, farthest_point_indices, finite_points, robust_radius,
-                                            subsample, voxel_downsample)
+from cemnet_ros.pipeline.preprocess import (
+    crop_range,
+    farthest_point_indices,
+    finite_points,
+    robust_radius,
+    subsample,
+    voxel_downsample,
+)
 from cemnet_ros.pipeline.worker import BoundedWorker
-from street_scene import make_transform, make_world
 
 
 def scan_of(world, pose, rng, n=12000):

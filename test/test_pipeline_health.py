@@ -1,12 +1,17 @@
 """Adaptive spread, failure signals, Hessian covariance and degenerate directions (no engine needed)."""
 import numpy as np
 import pytest
+from street_scene import make_transform
 
 from cemnet_ros.pipeline.adaptive import AdaptiveConfig, AdaptiveSpread
-from cemnet_ros.pipeline.covariance import (MIN_STD_ROTATION, Conditioning, covariance_from_hessian,
-                                            flat_covariance, keep_prediction_along)
+from cemnet_ros.pipeline.covariance import (
+    MIN_STD_ROTATION,
+    Conditioning,
+    covariance_from_hessian,
+    flat_covariance,
+    keep_prediction_along,
+)
 from cemnet_ros.pipeline.health import HealthConfig, HealthMonitor, Signals
-from street_scene import make_transform
 
 GOOD = Signals(fitness=0.8, disagreement_m=0.05, disagreement_rad=0.005, conditioning=0.3, spread_m=0.1)
 

@@ -6,8 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from cemnet_ros.pointcloud2 import (FLOAT32, FLOAT64, INT16, UINT8, CloudError, decode_xyz, encode_xyz,
-                                    make_pointcloud2)
+from cemnet_ros.pointcloud2 import FLOAT32, FLOAT64, INT16, UINT8, CloudError, decode_xyz, encode_xyz, make_pointcloud2
 
 
 def field(name, offset, datatype, count=1):
@@ -115,8 +114,8 @@ def test_encode_round_trip():
 
 
 def test_make_pointcloud2_rclpy_round_trip():
-    from rclpy.serialization import deserialize_message, serialize_message
     from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import PointCloud2, PointField
 
     msg = make_pointcloud2(PointCloud2, PointField, PTS, "lidar", Time(sec=3, nanosec=7))

@@ -13,14 +13,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from script_loader import load_script
 
 from cemnet_ros.data import scenes
+from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
-from script_loader import load_script
-from cemnet_ros.tools.replay_cli import load_params, main
-from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.schema import build
+from cemnet_ros.tools.replay_cli import load_params, main
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
@@ -146,7 +146,8 @@ def test_replay_reports_rejected_scans_and_goes_on(tmp_path, capsys):
             cloud = base[:10] if i == 1 else base + [0.1 * i, 0, 0]
             writer.write_cloud("/cloud", cloud, "cam", 10**18 + i * 10**8)
     out = tmp_path / "out"
-    assert main([str(bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "100", "--registration.cem.n_iters", "2",
+    assert main([str(bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "100",
+                 "--registration.cem.n_iters", "2",
                  "--no-plot"]) == 0
     summary = _summary(out)
     assert summary["scans"] == 3
@@ -351,7 +352,7 @@ def test_live_and_replay_fill_the_same_odometry(tmp_path):
     from std_msgs.msg import Header
 
     from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
-    from cemnet_ros.pipeline.odometry_output import UNKNOWN_VARIANCE, odometry_output
+    from cemnet_ros.pipeline.odometry_output import odometry_output
     from cemnet_ros.ros import messages
     from cemnet_ros.ros.node_config import NodeConfig
 

@@ -5,8 +5,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.replay.trajectory import (absolute_trajectory_error, associate, read_tum, relative_pose_errors,
-                                          rotation_angle_deg, umeyama_alignment, write_tum)
+from cemnet_ros.replay.trajectory import (
+    absolute_trajectory_error,
+    associate,
+    read_tum,
+    relative_pose_errors,
+    rotation_angle_deg,
+    umeyama_alignment,
+    write_tum,
+)
 
 
 def _pose(rotvec=(0.0, 0.0, 0.0), t=(0.0, 0.0, 0.0)) -> np.ndarray:

@@ -19,5 +19,6 @@ def geman_mcclure_loss(aligned: torch.Tensor, target: torch.Tensor, mu: float = 
         idx_tgt = nearest_sq_distances(target, aligned)[1]
     nearest_tgt = torch.gather(target, -2, idx_src.unsqueeze(-1).expand(*idx_src.shape, 3))
     nearest_src = torch.gather(aligned, -2, idx_tgt.unsqueeze(-1).expand(*idx_tgt.shape, 3))
-    loss = rho((aligned - nearest_tgt).square().sum(-1)).mean(-1) + rho((target - nearest_src).square().sum(-1)).mean(-1)
+    loss = (rho((aligned - nearest_tgt).square().sum(-1)).mean(-1)
+            + rho((target - nearest_src).square().sum(-1)).mean(-1))
     return loss.mean()

@@ -9,11 +9,11 @@ from typing import Optional
 import numpy as np
 import torch
 
+from . import nn_grid
 from .checkpoint import load_network
 from .config import RegistrationConfig, seed_or_none
 from .engine import CEMNet
 from .geometry import euler_to_matrix_np, matrix_to_action_np
-from . import nn_grid
 from .scoring import consensus_fitness, refine_with_icp
 
 NETWORK_MIN_POINTS = 20  # the network's k-NN graph

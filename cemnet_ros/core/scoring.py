@@ -15,7 +15,7 @@ from .geometry_torch import action_to_rt, procrustes, transform_points
 from .icp import batch_icp
 from .rewards import max_consensus_reward
 
-LATTICE_SPACING = CEMConfig.lattice_spacing  # the default lattice spacing (units of epsilon), for callers without a config
+LATTICE_SPACING = CEMConfig.lattice_spacing  # default spacing (units of epsilon), for callers without a config
 
 
 class CandidateScorer:

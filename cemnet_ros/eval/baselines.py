@@ -92,7 +92,7 @@ def open3d_available() -> bool:
     """True when ``import open3d`` works."""
     try:
         import open3d  # noqa: F401
-    except Exception:  # ImportError, or OSError from a missing shared library (libusb)
+    except Exception:  # noqa: BLE001 - ImportError, or OSError from a missing shared library (libusb)
         return False
     return True
 
@@ -100,7 +100,7 @@ def open3d_available() -> bool:
 def _import_open3d():
     try:
         import open3d as o3d
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - as in open3d_available
         raise BaselineUnavailable(
             f"the FPFH+RANSAC baseline needs Open3D, which cannot be imported ({exc}); install it with "
             "'pip install open3d-cpu' (Debian also needs 'apt-get install libusb-1.0-0')") from None

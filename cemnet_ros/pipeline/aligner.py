@@ -30,16 +30,14 @@ import numpy as np
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.core.global_search import global_search
+from cemnet_ros.pipeline import preprocess, refine
 from cemnet_ros.pipeline.adaptive import AdaptiveSpread
-from cemnet_ros.pipeline.covariance import (Conditioning, covariance_from_hessian, flat_covariance,
-                                            keep_prediction_along)
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.covariance import Conditioning, covariance_from_hessian, flat_covariance, keep_prediction_along
 from cemnet_ros.pipeline.deskew import deskew, se3_exp, se3_log
 from cemnet_ros.pipeline.health import HealthMonitor, Signals, disagreement
 from cemnet_ros.pipeline.motion import ConstantVelocity
-from cemnet_ros.pipeline.preprocess import (crop_range, finite_points, robust_radius,
-                                            subsample, voxel_downsample)
-from cemnet_ros.pipeline import preprocess, refine
+from cemnet_ros.pipeline.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
 from cemnet_ros.pipeline.refine import PolishResult, point_to_plane_icp
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 
@@ -450,8 +448,8 @@ class ScanAligner:
         rotation, translation = self._spread.spread(dt_ratio)
         sigma = (np.full(6, cfg.tracking.identity_sigma) if cfg.tracking.prior == "identity"
                  else np.r_[np.full(3, rotation), np.full(3, translation / self._scale)])
-        centre = T_predicted if cfg.tracking.prior != "identity" else self._motion.last_pose
-        T_cem, spread_m = self._cem(clouds, to_units, from_units, None if cfg.tracking.prior == "network" else centre, sigma)
+        centre = {"motion": T_predicted, "identity": self._motion.last_pose, "network": None}[cfg.tracking.prior]
+        T_cem, spread_m = self._cem(clouds, to_units, from_units, centre, sigma)
         voxel = self._polish_voxel()
         max_distance = float(np.clip(translation, 2.0 * voxel, TRACKING_PAIRING * voxel))
         polish = point_to_plane_icp(target_map, frame.polish, T_cem, max_distance, cfg.polish.iters)

@@ -40,8 +40,8 @@ class PreprocessConfig:
     sampling: str = param("random", "how the voxel cloud is cut to registration.n_points", choices=SAMPLING_METHODS)
     cem_radius: float = param(1.5, "the CEM's clouds keep the points this close to the sensor (units of scale)",
                               low=1e-3)
-    deskew: bool = param(True, "with per-point times: move each point to the sensor frame at the stamp "
-                         "(constant velocity)")
+    deskew: bool = param(True, "with per-point times: undo the motion within each sweep (constant velocity; "
+                         "registered at the sweep's middle, published at the stamp)")
 
     def __post_init__(self) -> None:
         if self.sampling not in SAMPLING_METHODS:
@@ -95,7 +95,7 @@ class RecoveryConfig:
     search: GlobalSearchConfig = section(GlobalSearchConfig, "the global CEM search")
     radius: float = param(10.0, "translation radius (m) searched around the prediction; yaw is searched "
                                    "over the full circle", low=0.0)
-    points: int = param(256, "source and map points the global search scores (the polish brings the "
+    points: int = param(512, "source and map points the global search scores (the polish brings the "
                                  "precision)", low=32)
     gap: float = param(1.0, "a stamp gap longer than this (s) triggers the global search", low=1e-3)
     ambiguity_ratio: float = param(0.9, "a distinct hypothesis this close in fitness makes the answer ambiguous",

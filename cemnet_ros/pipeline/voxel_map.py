@@ -19,7 +19,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-
 # The threading policy of cemnet_ros.core.nn_grid (OpenMP first: thread-safe across calling threads).
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 EMPTY = -1  # a free hash table entry; packed keys are never negative

@@ -24,7 +24,7 @@ from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
 from cemnet_ros.pipeline.odometry_output import UNKNOWN_VARIANCE  # align_node's unmeasured twist
-from cemnet_ros.pointcloud2 import CloudError, CloudReport, decode_xyz, make_pointcloud2
+from cemnet_ros.pointcloud2 import CloudError, CloudReport, decode_point_times, decode_xyz, make_pointcloud2
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -199,6 +199,7 @@ class CloudFrame:
     points: np.ndarray  # (n,3) float64, finite
     frame_id: str
     report: CloudReport
+    times: Optional[np.ndarray] = None  # per-point s relative to the stamp (deskewing); None without a time field
 
 
 @dataclass
@@ -297,7 +298,11 @@ class BagReader:
             except CloudError as err:
                 raise BagError(f"{self.info.cloud_topic} message {i}: {err}") from err
             stamp = stamp_to_ns(msg.header.stamp) or bag_ns
-            yield CloudFrame(stamp, points, msg.header.frame_id, report)
+            try:
+                times = decode_point_times(msg, stamp)
+            except CloudError:  # an unreadable time field: the scan is used without deskewing, as live
+                times = None
+            yield CloudFrame(stamp, points, msg.header.frame_id, report, times)
 
     def ground_truth(self) -> tuple[np.ndarray, np.ndarray, str]:
         """(stamps_ns (n,), poses (n,4,4), frame_id); empty arrays when the bag has no ground truth."""

@@ -102,7 +102,8 @@ class AlignNode(Node):
         self._odom_pub = self.create_publisher(Odometry, "~/odometry", 10)
         self._cloud_pub = self.create_publisher(PointCloud2, "~/aligned_cloud", 10) if cfg.publish_aligned_cloud \
             else None
-        map_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        map_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._map_pub = self.create_publisher(PointCloud2, "~/local_map", map_qos)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._tf_pub = self.create_publisher(TFMessage, "/tf", 100) if TFMessage is not None and cfg.publish_tf \
@@ -229,7 +230,8 @@ class AlignNode(Node):
 
         path = Path(f"cemnet_map_{time.strftime('%Y%m%d_%H%M%S')}.ply").resolve()
         write_ply(path, self._map_in_odom(local_map))
-        response.success, response.message = True, f"wrote {len(local_map.points)} map points ({self._cfg.odom_frame}) to {path}"
+        response.success = True
+        response.message = f"wrote {len(local_map.points)} map points ({self._cfg.odom_frame}) to {path}"
         self.get_logger().info(response.message)
         return response
 

@@ -39,7 +39,7 @@ class NodeConfig:
     qos_reliability: str = param("best_effort", "input QoS reliability ('best_effort' = sensor data)",
                                  choices=RELIABILITIES)
     qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
-    queue_size: int = param(5, "scans waiting for the worker (5 absorb a global search at 20 Hz); when full the "
+    queue_size: int = param(8, "scans waiting for the worker (8 absorb a global search at 20 Hz); when full the "
                             "oldest is dropped", low=1, high=100)
     covariance_mode: str = param("registration", "'registration': from the polish's Hessian (docs/node.md); "
                                  "'fixed': the fixed variances below", choices=COVARIANCE_MODES)
@@ -74,7 +74,8 @@ def configs_from_parameters(values: Mapping[str, Any]) -> tuple[NodeConfig, Alig
 
 HEADER = """align_node parameters (ROS 2 params file, keyed /** so that it applies under any namespace or node name).
   ros2 launch cemnet_ros align_node.launch.py   (uses the installed copy of this file)
-  ros2 run cemnet_ros align_node --ros-args --params-file $(ros2 pkg prefix cemnet_ros)/share/cemnet_ros/config/align_node.yaml
+  ros2 run cemnet_ros align_node --ros-args \\
+    --params-file $(ros2 pkg prefix cemnet_ros)/share/cemnet_ros/config/align_node.yaml
 Every parameter is read once at start-up. Generated from the schema: python -m cemnet_ros.ros.node_config"""
 
 

@@ -20,10 +20,10 @@ from tqdm import tqdm
 
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.checkpoint import CheckpointError
+from cemnet_ros.data.shapes import bracket_shape
 from cemnet_ros.eval.baselines import icp
 from cemnet_ros.eval.metrics import pair_metrics
 from cemnet_ros.eval.protocol import ProtocolConfig, RegistrationPair, load_shapes, make_pair
-from cemnet_ros.data.shapes import bracket_shape
 from cemnet_ros.io.atomic import atomic_write_text
 from cemnet_ros.tools.engine_args import add_engine_args, config_from_args
 

@@ -180,7 +180,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     shown = {name.get(m, m): agg for m, agg in aggregates.items()}
     crop = "full" if args.full else f"partial ({args.far_point} far point)"
     title = (f"{args.setting}, {crop}, split {args.split}, {len(pairs)} pairs"
-             f" (weights: {Path(args.weights).name if args.weights else 'package default'})")
+             f" (weights: {Path(config.weights).name if config.weights else 'package default'})")
     table = markdown_table(shown, title)
     print(table)
     try:

@@ -30,10 +30,18 @@ from cemnet_ros.io.atomic import atomic_write_text
 from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.pipeline.odometry_output import odometry_output
-from cemnet_ros.replay.bag_io import (ODOMETRY, POINTCLOUD2, POSE_STAMPED, TF_MESSAGE, TF_STATIC_TOPIC, TF_TOPIC,
-                                      BagError, BagReader, BagWriter)
-from cemnet_ros.replay.trajectory import (absolute_trajectory_error, associate, relative_pose_errors,
-                                          write_tum)
+from cemnet_ros.replay.bag_io import (
+    ODOMETRY,
+    POINTCLOUD2,
+    POSE_STAMPED,
+    TF_MESSAGE,
+    TF_STATIC_TOPIC,
+    TF_TOPIC,
+    BagError,
+    BagReader,
+    BagWriter,
+)
+from cemnet_ros.replay.trajectory import absolute_trajectory_error, associate, relative_pose_errors, write_tum
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.schema import add_arguments, build, flatten_mapping, parameters, parsed_overrides
 
@@ -141,7 +149,7 @@ def run_replay(reader: BagReader, aligner, out_bag: Path, limit: Optional[int], 
 
         for i, frame in enumerate(reader.clouds(limit)):
             try:
-                step = aligner.process(frame.points, frame.stamp_ns)
+                step = aligner.process(frame.points, frame.stamp_ns, frame.times)
             except ValueError as err:  # ScanRejected (too few points, ...) or a cloud the core refuses
                 result.rejected.append({"index": i, "stamp_ns": frame.stamp_ns, "reason": str(err)})
                 bar.update()

@@ -15,7 +15,6 @@ from typing import Optional
 from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
 
-
 BEST_METRICS = ("val_mae_r_deg", "val_prior_mae_r_deg", "val_loss")
 LR_SCHEDULES = ("constant", "cosine")
 
@@ -98,12 +97,9 @@ class TrainConfig:
             raise ValueError("num_workers must be >= 0")
 
 
-# Measured on 2 shared CPU cores (docs/training.md): the DGCNN forward/backward dominates (about 0.5 s of CPU
-# per pair with the reference's Conv2d layout; ~3x less since it runs as channels-last matrix products: an epoch
-# of this preset now takes ~65 s on the idle machine), the CEM adds ~10 % at N = 300 and ~35-50 % at N = 1000. A paper batch (32 pairs, N = 1000) costs
-# about 30 s of CPU (60 s of wall time on the loaded machine), so the CPU preset takes 4x smaller batches
-# (4x more optimiser steps per hour) with the reference code's learning rate 1e-3 (the paper states 1e-4,
-# too slow for a few hundred steps), and a cheaper validation CEM (N = 300; the fused reward stays on).
+# A CPU hour holds few paper-size batches (32 pairs, N = 1000; timings in docs/training.md): the CPU preset takes
+# 4x smaller batches (4x more optimiser steps) at the reference code's learning rate 1e-3 (the paper's 1e-4 is
+# too slow for a few hundred steps) and a cheaper validation CEM (N = 300; the fused reward stays on).
 CPU_PRESET = dict(batch_size=8, lr=1e-3, lr_schedule="cosine", n_candidates=300, n_iters=10, val_n_candidates=300)
 
 
