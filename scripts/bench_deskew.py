@@ -34,7 +34,7 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 
 from cemnet_ros.data.scenes import LidarModel  # noqa: E402
 from cemnet_ros.data.skewed import SPEED, YAW_RATE_DEG, SkewedSequence, skewed_sequence  # noqa: E402
-from cemnet_ros.io.atomic import atomic_write_text  # noqa: E402
+from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, relative_pose_errors  # noqa: E402
 
 MODES = ("off", "on")
@@ -153,26 +153,11 @@ def summarize(drives: list[dict]) -> dict:
     return out
 
 
-def _jsonable(obj):
-    """Plain JSON types: arrays to lists, non-finite floats to null."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
-
-
 def write_json(path: Path, meta: dict, drives: list[dict]) -> None:
     """Atomic JSON of everything measured so far."""
     path.parent.mkdir(parents=True, exist_ok=True)
     body = {"meta": meta, "drives": drives, "summary": summarize(drives) if drives else {}}
-    atomic_write_text(path, json.dumps(_jsonable(body), indent=1, allow_nan=False) + "\n")
+    atomic_write_text(path, json.dumps(jsonable(body), indent=1, allow_nan=False) + "\n")
 
 
 def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:

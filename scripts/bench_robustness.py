@@ -48,7 +48,7 @@ from cemnet_ros.data.scenes import (  # noqa: E402
     random_sensor_pose,
 )
 from cemnet_ros.data.shared import shared_dir  # noqa: E402
-from cemnet_ros.io.atomic import atomic_write_text  # noqa: E402
+from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
 from cemnet_ros.replay.trajectory import rotation_angle_deg  # noqa: E402
 
 SETS = ("kitti_gaps", "large_motion", "sequences", "corridor", "speed")
@@ -752,25 +752,10 @@ def report(results: dict) -> str:
     return "\n\n".join(parts + [DEFINITIONS])
 
 
-def _jsonable(obj):
-    """Plain JSON types: arrays to lists, non-finite floats to null."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
-
-
 def write_json(path: Path, meta: dict, results: dict) -> None:
     """Atomic JSON of everything measured so far."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, json.dumps(_jsonable({"meta": meta, "sets": results}), indent=1, allow_nan=False) + "\n")
+    atomic_write_text(path, json.dumps(jsonable({"meta": meta, "sets": results}), indent=1, allow_nan=False) + "\n")
 
 
 # ----------------------------------------------------------------------------------------------------------
