@@ -166,7 +166,8 @@ def add_arguments(parser: argparse.ArgumentParser, params: Mapping[str, Paramete
     """One ``--<dotted.name>`` flag per parameter, also spelt with hyphens (absent flags keep the config's value)."""
     group = parser.add_argument_group(title)
     for p in params.values():
-        help_text = p.describe().replace("%", "%%")  # argparse formats help strings
+        default = list(p.default) if p.kind is tuple else p.default
+        help_text = f"{p.describe()} (default: {default!r})".replace("%", "%%")  # argparse formats help strings
         kwargs: dict[str, Any] = {"dest": p.name, "default": argparse.SUPPRESS, "help": help_text}
         if p.choices:
             kwargs.update(type=p.kind, choices=p.choices)

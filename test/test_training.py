@@ -221,7 +221,7 @@ def test_time_budget_stops_after_a_validated_epoch(shapes_npz, tmp_path):
 
 
 def test_config_rejects_bad_values():
-    for bad in (dict(batch_size=1), dict(val_fraction=1.0), dict(best_metric="accuracy"), dict(max_minutes=0),
+    for bad in (dict(batch_size=1), dict(val_fraction=1.0), dict(best_metric="accuracy"), dict(max_minutes=-1),
                 dict(lr_schedule="step")):
         with pytest.raises(ValueError):
             TrainConfig(**bad)
@@ -278,8 +278,9 @@ def test_ddp_two_cpu_ranks_stay_in_sync(shapes_npz, tmp_path):
 
 # ---------------------------------------------------------------------------------------------- CLI
 def test_cli_smoke_npz_and_scan_folder(shapes_npz, tmp_path):
-    common = ["--epochs", "1", "--batch-size", "4", "--n-candidates", "16", "--n-iters", "2",
-              "--val-n-candidates", "16", "--threads", "1", "--no-progress", "--n-points", "160", "--n-partial", "96"]
+    common = ["--epochs", "1", "--batch-size", "4", "--cem.n-candidates", "16", "--cem.n_iters", "2",
+              "--val_cem.n_candidates", "16", "--threads", "1", "--no-progress", "--protocol.n-points", "160",
+              "--protocol.n_partial", "96"]
     out = tmp_path / "cli"
     assert train_cli.main(["--data", str(shapes_npz), "--out", str(out), *common]) == 0
     with open(out / "log.csv", newline="") as handle:
@@ -305,3 +306,23 @@ def test_cli_rejects_bad_input(tmp_path, capsys):
     assert "missing.npz" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         train_cli.main(["--out", str(tmp_path)])  # --data is required
+
+
+def test_cli_flags_come_from_the_schema_and_override_the_preset(tmp_path):
+    parser = train_cli.build_parser()
+    base = ["--data", "d.npz", "--out", str(tmp_path)]
+    cpu = train_cli.config_from_args(parser.parse_args([*base, "--preset", "cpu"]), "cpu")
+    assert (cpu.batch_size, cpu.lr, cpu.cem.n_candidates, cpu.val_cem.n_candidates) == (8, 1e-3, 300, 300)
+    assert cpu.cem.n_fused_iters == 0 and cpu.cem.seed == UNSEEDED  # the training CEM's other settings stay
+    args = parser.parse_args([*base, "--preset", "auto", "--cem.n-candidates", "40", "--val_cem.n_candidates", "50",
+                              "--batch_size", "6", "--protocol.partial", "false", "--protocol.noise",
+                              "--allow-pickle", "--init-weights", "w.pth", "--limit-train", "3"])
+    config = train_cli.config_from_args(args, "cpu")
+    assert (config.cem.n_candidates, config.val_cem.n_candidates, config.batch_size, config.lr) == (40, 50, 6, 1e-3)
+    assert not config.protocol.partial and config.protocol.noise and config.allow_pickle
+    assert (config.init_weights, config.limit_train, config.limit_val, config.max_minutes) == ("w.pth", 3, 0, 0.0)
+    paper = train_cli.config_from_args(parser.parse_args(base), "cuda")
+    assert paper == TrainConfig(data="d.npz", out_dir=str(tmp_path))
+    with pytest.raises(SystemExit):
+        parser.parse_args([*base, "--n-candidates", "40"])  # the old flag names are gone
+    assert train_cli.main([*base, "--protocol.n_points", "2", "--no-progress"]) == 2  # out of range

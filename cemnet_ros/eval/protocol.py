@@ -22,6 +22,8 @@ from typing import Iterator, Optional, Tuple, Union
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cemnet_ros.schema import param
+
 # Distance of the far point that selects the partial view (unit-sphere objects: "at infinity").
 _FAR_RADIUS = 500.0
 FAR_POINTS = ("reference", "sphere")
@@ -31,15 +33,17 @@ FAR_POINTS = ("reference", "sphere")
 class ProtocolConfig:
     """How a registration pair is made from one shape."""
 
-    n_points: int = 1024  # the first n_points of each shape are used
-    n_partial: int = 768  # points kept per cloud by the partial crop
-    max_angle_deg: float = 45.0  # Euler angles ~ U[0, max_angle_deg] per axis
-    max_translation: float = 0.5  # translation ~ U[-max, max] per axis
-    partial: bool = True
-    noise: bool = False
-    noise_sigma: float = 0.01
-    noise_clip: float = 0.05
-    far_point: str = "reference"  # partial crop point: "reference" (+-500 (1, 1, 1) + U[0, 1)^3) or "sphere"
+    n_points: int = param(1024, "the first n_points of each shape are used (a scan keeps n_points random points)",
+                          low=3)
+    n_partial: int = param(768, "points kept per cloud by the partial crop (<= n_points)", low=3)
+    max_angle_deg: float = param(45.0, "Euler angles ~ U[0, max_angle_deg] per axis (degrees)", low=0.0, high=180.0)
+    max_translation: float = param(0.5, "translation ~ U[-max, max] per axis", low=0.0)
+    partial: bool = param(True, "partial crop of both clouds (false = full clouds)")
+    noise: bool = param(False, "clipped Gaussian noise on both clouds")
+    noise_sigma: float = param(0.01, "standard deviation of the noise", low=0.0)
+    noise_clip: float = param(0.05, "the noise is clipped to [-noise_clip, noise_clip]", low=0.0)
+    far_point: str = param("reference", "partial crop point: 'reference' (+-500 (1, 1, 1) + U[0, 1)^3, the paper's) "
+                           "or 'sphere' (a uniformly random direction)", choices=FAR_POINTS)
 
     def __post_init__(self) -> None:
         if self.n_points < 3:

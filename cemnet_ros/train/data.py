@@ -113,8 +113,9 @@ def split_train_val(n: int, val_fraction: float, seed: int) -> tuple[np.ndarray,
     return np.sort(order[n_val:]), np.sort(order[:n_val])
 
 
-def _limit(indices: np.ndarray, limit: int | None) -> np.ndarray:
-    return indices if limit is None else indices[:limit]
+def _limit(indices: np.ndarray, limit: int) -> np.ndarray:
+    """The first ``limit`` indices; all of them for ``limit`` 0."""
+    return indices[:limit] if limit > 0 else indices
 
 
 def build_datasets(config: TrainConfig) -> tuple[PairDataset, PairDataset]:

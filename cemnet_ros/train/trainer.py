@@ -80,7 +80,7 @@ class Trainer:
     def __init__(self, config: TrainConfig, info: Optional[ddp.DistInfo] = None):
         self.config = config
         self.info = info or ddp.DistInfo(device=ddp.resolve_device(config.device))
-        if config.threads is not None:
+        if config.threads > 0:
             torch.set_num_threads(config.threads)
             numba.set_num_threads(min(config.threads, numba.config.NUMBA_NUM_THREADS))
         self.out_dir = Path(config.out_dir)
@@ -103,7 +103,7 @@ class Trainer:
 
     # ----------------------------------------------------------------------------------------- setup
     def _initial_network(self) -> SamplingNetwork:
-        if self.config.init_weights is None:
+        if not self.config.init_weights:
             return SamplingNetwork()
         return load_network(self.config.init_weights, allow_pickle=self.config.allow_pickle)
 
@@ -231,7 +231,7 @@ class Trainer:
     def _out_of_time(self, elapsed: float, train_time: float) -> bool:
         """Rank 0 decides (for every rank) whether this epoch's validation plus one more epoch would overrun
         ``config.max_minutes``, estimating both from the last measured durations."""
-        if self.config.max_minutes is None:
+        if self.config.max_minutes <= 0:
             return False
         val_time = next((float(r["val_time_s"]) for r in reversed(self.rows) if r.get("val_time_s") not in ("", None)),
                         0.0)
