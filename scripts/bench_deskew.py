@@ -35,24 +35,12 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 from cemnet_ros.data.scenes import LidarModel  # noqa: E402
 from cemnet_ros.data.skewed import SPEED, YAW_RATE_DEG, SkewedSequence, skewed_sequence  # noqa: E402
 from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
+from cemnet_ros.io.console import log, progress  # noqa: E402
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, relative_pose_errors  # noqa: E402
 
 MODES = ("off", "on")
 FULL = {"drives": 3, "scans": 50, "beams": 32, "azimuth": 1000}
 QUICK = {"drives": 1, "scans": 12, "beams": 16, "azimuth": 360}
-
-
-def log(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
-def progress(items, desc: str):
-    """tqdm on stderr when available, else the items unchanged."""
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return items
-    return tqdm(items, desc=desc, file=sys.stderr, leave=False, mininterval=1.0)
 
 
 def ate_first_pose(estimated: list[np.ndarray], truth: list[np.ndarray]) -> float:

@@ -49,6 +49,7 @@ from cemnet_ros.data.scenes import (  # noqa: E402
 )
 from cemnet_ros.data.shared import shared_dir  # noqa: E402
 from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
+from cemnet_ros.io.console import log, progress  # noqa: E402
 from cemnet_ros.replay.trajectory import rotation_angle_deg  # noqa: E402
 
 SETS = ("kitti_gaps", "large_motion", "sequences", "corridor", "speed")
@@ -298,19 +299,6 @@ def _record(case: str, scan: Scan, rte: Optional[float], rre: Optional[float], e
     error = error or scan.error
     return {"case": case, "index": scan.tick, "accepted": scan.accepted and error is None,
             "reason": error or scan.reason, "rte_m": rte, "rre_deg": rre, "ms": scan.ms, "error": error}
-
-
-def log(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
-def progress(items, desc: str):
-    """tqdm on stderr when available, else the items unchanged."""
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return items
-    return tqdm(items, desc=desc, file=sys.stderr, leave=False, mininterval=1.0)
 
 
 # ----------------------------------------------------------------------------------------------------------
