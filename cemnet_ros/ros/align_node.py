@@ -93,6 +93,7 @@ class AlignNode(Node):
         self._aligner: Any = None
         self._engine_ready = threading.Event()  # set when loaded, or when loading failed / the node closes
         self._engine_error: Optional[BaseException] = None
+        self._map_lock = threading.Lock()  # the worker changes the map; services and timers read it
         self._last_warn: dict = {}
         self._last_stamp_ns: Optional[int] = None
         self._requests: dict[str, Any] = {}
@@ -229,9 +230,10 @@ class AlignNode(Node):
         from cemnet_ros.io.pointcloud_files import write_ply
 
         path = Path(f"cemnet_map_{time.strftime('%Y%m%d_%H%M%S')}.ply").resolve()
-        write_ply(path, self._map_in_odom(local_map))
+        points = self._map_in_odom(local_map)
+        write_ply(path, points)
         response.success = True
-        response.message = f"wrote {len(local_map.points)} map points ({self._cfg.odom_frame}) to {path}"
+        response.message = f"wrote {len(points)} map points ({self._cfg.odom_frame}) to {path}"
         self.get_logger().info(response.message)
         return response
 
@@ -254,7 +256,8 @@ class AlignNode(Node):
             if isinstance(item, Scan):
                 source, frame = item, self._cfg.odom_frame
                 self._sensor_extrinsic(item.msg.header.frame_id)
-                step = self._aligner.process(item.points, item.stamp_ns, item.times)
+                with self._map_lock:
+                    step = self._aligner.process(item.points, item.stamp_ns, item.times)
             else:
                 source, target = item
                 frame = target.msg.header.frame_id or self._cfg.odom_frame
@@ -336,7 +339,8 @@ class AlignNode(Node):
 
     def _map_in_odom(self, local_map: Any) -> np.ndarray:
         """The map's points (kept in the first sensor frame) in odom_frame."""
-        points = local_map.points
+        with self._map_lock:
+            points = local_map.points
         T = self._base.T_base_sensor
         return points @ T[:3, :3].T + T[:3, 3]
 
