@@ -31,7 +31,7 @@ setup(
         "pyyaml>=6.0",
     ],
     extras_require={
-        "test": ["pytest>=7", "colcon-common-extensions", "ruff>=0.17,<0.18"],
+        "test": ["pytest>=7", "colcon-common-extensions", "ruff>=0.17,<0.18", "mypy>=2.4,<3"],
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         "open3d": ["open3d-cpu>=0.18"],
         "bench": ["kiss-icp", "small-gicp", "evo"],

@@ -31,6 +31,9 @@ class CEMNet(nn.Module):
     sampling network; the scores themselves carry no gradient.
     """
 
+    network: Optional[SamplingNetwork]  # submodule and buffer: typed here, as nn.Module's attributes are not
+    prior_sigma: torch.Tensor
+
     def __init__(self, cem: CEMConfig | None = None, network: Optional[SamplingNetwork] = None,
                  prior_sigma: tuple[float, ...] = (1.0,) * 6):
         super().__init__()

@@ -5,6 +5,8 @@ official checkpoints load into it (see :mod:`cemnet_ros.core.checkpoint` for the
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -87,8 +89,9 @@ class SamplingNetwork(nn.Module):
         # when True, else the running statistics. Training always uses batch statistics.
         self.batch_stats_at_inference = False
 
-    def _norm(self, bn: nn.Module, x: torch.Tensor) -> torch.Tensor:
-        """BatchNorm of ``x`` (M, C), channels last, in the mode that applies (see batch_stats_at_inference)."""
+    def _norm(self, bn: Any, x: torch.Tensor) -> torch.Tensor:
+        """BatchNorm (``bn``: nn.BatchNorm1d/2d) of ``x`` (M, C), channels last, in the mode that applies (see
+        batch_stats_at_inference)."""
         if self.training:
             bn.num_batches_tracked.add_(1)
             return F.batch_norm(x, bn.running_mean, bn.running_var, bn.weight, bn.bias, True, bn.momentum, bn.eps)
@@ -96,7 +99,7 @@ class SamplingNetwork(nn.Module):
             return F.batch_norm(x, None, None, bn.weight, bn.bias, True, 0.0, bn.eps)
         return F.batch_norm(x, bn.running_mean, bn.running_var, bn.weight, bn.bias, False, 0.0, bn.eps)
 
-    def _conv_bn_relu(self, conv: nn.Conv2d, bn: nn.BatchNorm2d, x: torch.Tensor) -> torch.Tensor:
+    def _conv_bn_relu(self, conv: nn.Conv2d, bn: Any, x: torch.Tensor) -> torch.Tensor:
         """relu(bn(conv(x))) of a 1x1 convolution as one matrix product on channels-last ``x`` (..., C_in)."""
         weight = conv.weight.flatten(1)  # (C_out, C_in)
         rows = x.reshape(-1, x.shape[-1])

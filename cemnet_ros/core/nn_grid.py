@@ -22,7 +22,7 @@ import numpy as np
 
 # OpenMP first: thread-safe when several threads register at once (a node's worker and a caller), and it
 # skips the too-old TBB some machines carry (numba warns about it on every start otherwise).
-numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]  # type: ignore[attr-defined]
 MAX_NODES = 8_000_000  # a larger box gets a coarser lattice
 FAR = 1e9  # coordinates of the sentinel point that empty nodes refer to
 

@@ -97,13 +97,14 @@ def refine_with_icp(source: np.ndarray, target: np.ndarray, rotation: np.ndarray
                     steps: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Optional final point-to-point ICP refinement of one motion (exact k-d tree correspondences within radius)."""
     tree = cKDTree(target)
-    source = torch.as_tensor(source, dtype=torch.float64)
+    source_t = torch.as_tensor(source, dtype=torch.float64)
     for _ in range(steps):
-        dist, idx = tree.query(source.numpy() @ rotation.T + translation, distance_upper_bound=radius)
+        dist, idx = tree.query(source @ rotation.T + translation, distance_upper_bound=radius)
         inliers = np.isfinite(dist)
         if inliers.sum() < 3:
             break
-        rot, trans = procrustes(source[inliers][None], torch.as_tensor(target[idx[inliers]], dtype=torch.float64)[None])
+        matched = torch.as_tensor(target[idx[inliers]], dtype=torch.float64)
+        rot, trans = procrustes(source_t[inliers][None], matched[None])
         rotation, translation = rot[0].numpy(), trans[0].numpy()
     return rotation, translation
 
