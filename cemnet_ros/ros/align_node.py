@@ -219,8 +219,14 @@ class AlignNode(Node):
         T = np.eye(4)
         T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
         T[:3, 3] = (p.x, p.y, p.z)
-        self._request("set_pose", T, None, f"set_pose: the next scan starts a new map at x={p.x:.3f} y={p.y:.3f} "
-                      f"z={p.z:.3f} in {self._cfg.odom_frame} (a deliberate jump)")
+        message = (f"set_pose: the next scan starts a new map at x={p.x:.3f} y={p.y:.3f} z={p.z:.3f} in "
+                   f"{self._cfg.odom_frame} (a deliberate jump)")
+        if self._aligner is None:  # still loading: applied before the first scan
+            self._request("set_pose", T, None, message)
+            return
+        with self._map_lock:  # between two scans: the worker holds the lock while it registers one
+            self._aligner.reset(self._base.sensor_pose(T))
+        self.get_logger().info(message)
 
     def _on_save_map(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         local_map = None if self._aligner is None else self._aligner.local_map
