@@ -24,6 +24,18 @@ def pose_from_xyz_rpy(values: tuple | np.ndarray) -> np.ndarray:
     return T
 
 
+def pose_msg_to_matrix(pose) -> np.ndarray:
+    """A geometry_msgs/Pose (rclpy or rosbags) -> 4x4; the quaternion normalised, a zero one refused (ValueError)."""
+    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w], dtype=np.float64)
+    norm = np.linalg.norm(q)
+    if not np.isfinite(norm) or norm < 1e-9:
+        raise ValueError(f"invalid pose quaternion {q.tolist()}")
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_quat(q / norm).as_matrix()
+    out[:3, 3] = [pose.position.x, pose.position.y, pose.position.z]
+    return out
+
+
 class BaseFrame:
     """Conjugates the sensor's trajectory by a fixed extrinsic ``T_base_sensor`` (4x4)."""
 

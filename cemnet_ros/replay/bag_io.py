@@ -23,6 +23,7 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 
+from cemnet_ros.pipeline.extrinsic import pose_msg_to_matrix
 from cemnet_ros.pipeline.odometry_output import UNKNOWN_VARIANCE  # align_node's unmeasured twist
 from cemnet_ros.pointcloud2 import CloudError, CloudReport, decode_point_times, decode_xyz, make_pointcloud2
 
@@ -52,18 +53,6 @@ def ns_to_stamp(stamp_ns: int):
         raise ValueError(f"stamp must be >= 0 ns, got {stamp_ns}")
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     return TYPESTORE.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
-
-
-def pose_msg_to_matrix(pose) -> np.ndarray:
-    """geometry_msgs/Pose -> 4x4 matrix (quaternion normalised; a zero quaternion is rejected)."""
-    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w], dtype=np.float64)
-    norm = np.linalg.norm(q)
-    if not np.isfinite(norm) or norm < 1e-9:
-        raise ValueError(f"invalid pose quaternion {q.tolist()}")
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_quat(q / norm).as_matrix()
-    out[:3, 3] = [pose.position.x, pose.position.y, pose.position.z]
-    return out
 
 
 def matrix_to_pose_msg(transform: np.ndarray):

@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
-from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy, pose_msg_to_matrix
 from cemnet_ros.pipeline.node_status import NodeStatus
 from cemnet_ros.pipeline.odometry_output import odometry_output
 from cemnet_ros.pipeline.pairing import PairMatcher
@@ -215,10 +215,16 @@ class AlignNode(Node):
                              "relocalize: the next scan runs the global search against the local map")
 
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
-        p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        T = np.eye(4)
-        T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-        T[:3, 3] = (p.x, p.y, p.z)
+        frame = msg.header.frame_id
+        if frame and frame != self._cfg.odom_frame:
+            self._warn_throttled("set_pose", f"set_pose ignored: given in {frame!r}, not in {self._cfg.odom_frame!r}")
+            return
+        try:
+            T = pose_msg_to_matrix(msg.pose.pose)
+        except ValueError as exc:
+            self._warn_throttled("set_pose", f"set_pose ignored: {exc}")
+            return
+        p = msg.pose.pose.position
         message = (f"set_pose: the next scan starts a new map at x={p.x:.3f} y={p.y:.3f} z={p.z:.3f} in "
                    f"{self._cfg.odom_frame} (a deliberate jump)")
         if self._aligner is None:  # still loading: applied before the first scan
