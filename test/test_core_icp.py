@@ -2,8 +2,9 @@ import numpy as np
 import torch
 
 from cemnet_ros.core.geometry_torch import euler_to_matrix, transform_points
-from cemnet_ros.core.icp import batch_icp
-from cemnet_ros.core.scoring import refine_with_icp
+from cemnet_ros.core.icp import kabsch, point_to_point_icp
+from cemnet_ros.core.icp_torch import batch_icp
+from cemnet_ros.core.lattice_rewards import best_rotation
 
 
 def test_batched_icp_recovers_small_motions(bracket):
@@ -18,12 +19,23 @@ def test_batched_icp_recovers_small_motions(bracket):
     assert torch.det(r).sub(1).abs().max() < 1e-9
 
 
-def test_cpu_icp_refinement_converges(bracket):
+def test_kabsch_exact_and_no_reflection(bracket):
+    rot = euler_to_matrix(torch.tensor([0.7, -0.35, 1.3], dtype=torch.float64)).numpy()
+    trans = np.array([0.3, -0.1, 0.7])
+    r, t = kabsch(bracket, bracket @ rot.T + trans)
+    np.testing.assert_allclose(r, rot, atol=1e-10)
+    np.testing.assert_allclose(t, trans, atol=1e-10)
+    mirrored = bracket * np.array([1.0, 1.0, -1.0])  # best orthogonal fit is a reflection
+    r, _ = kabsch(bracket, mirrored)
+    assert abs(np.linalg.det(r) - 1.0) < 1e-10
+
+
+def test_point_to_point_icp_converges(bracket):
     src = bracket[:512]
     rot = euler_to_matrix(torch.tensor([0.04, 0.02, -0.03], dtype=torch.float64)).numpy()
     trans = np.array([0.02, -0.02, 0.01])
     tgt = src @ rot.T + trans
-    r, t = refine_with_icp(src, tgt, np.eye(3), np.zeros(3), steps=30, radius=0.2)
+    r, t = point_to_point_icp(src, tgt, np.eye(3), np.zeros(3), max_iterations=30, max_distance=0.2)
     np.testing.assert_allclose(r, rot, atol=1e-6)
     np.testing.assert_allclose(t, trans, atol=1e-6)
 
@@ -35,8 +47,6 @@ def _kabsch(cov: np.ndarray) -> np.ndarray:
 
 
 def test_quaternion_rotation_of_the_cpu_icp_equals_kabsch_with_reflection_fix():
-    from cemnet_ros.core.nn_grid import _best_rotation
-
     rng = np.random.default_rng(0)
     covariances = list(rng.normal(size=(200, 3, 3)))  # about half need the reflection fix
     for i in range(200):  # noisy correspondences of a true motion, and flat (planar) sets
@@ -45,9 +55,9 @@ def test_quaternion_rotation_of_the_cpu_icp_equals_kabsch_with_reflection_fix():
         y = x @ rot.T + rng.normal(scale=0.01, size=x.shape)
         covariances.append((x - x.mean(0)).T @ (y - y.mean(0)))
         if i % 2 == 0:
-            np.testing.assert_allclose(_best_rotation(covariances[-1]), rot, atol=0.05)
+            np.testing.assert_allclose(best_rotation(covariances[-1]), rot, atol=0.05)
     for cov in covariances:
-        r = _best_rotation(cov)
+        r = best_rotation(cov)
         np.testing.assert_allclose(r, _kabsch(cov), atol=1e-8)
         np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-10)
         assert abs(np.linalg.det(r) - 1.0) < 1e-10

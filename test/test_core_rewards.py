@@ -2,11 +2,11 @@ import numpy as np
 import pytest
 import torch
 
-from cemnet_ros.core import nn_grid
 from cemnet_ros.core.geometry import euler_to_matrix_np
+from cemnet_ros.core.lattice import locality_order
+from cemnet_ros.core.lattice_rewards import LATTICE_SPACING, LatticePair
 from cemnet_ros.core.losses import geman_mcclure_loss
 from cemnet_ros.core.rewards import chamfer_distance, max_consensus_distance, max_consensus_reward
-from cemnet_ros.core.scoring import LATTICE_SPACING
 
 
 def test_lemma_mc_equals_chamfer_over_epsilon_when_epsilon_covers_all_distances(bracket):
@@ -35,8 +35,7 @@ def test_cpu_lattice_kernel_matches_brute_force(bracket):
     eps = 0.1
     rots = euler_to_matrix_np(rng.normal(0, 0.05, (64, 3)))
     trans = rng.normal(0, 0.03, (64, 3))
-    grids = [nn_grid.build_grid(c, eps, eps * LATTICE_SPACING).astuple() for c in (tgt, src)]
-    fast = nn_grid.consensus_batch(src, tgt, grids[0], grids[1], rots, trans, eps)
+    fast = LatticePair.build(src, tgt, eps, eps * LATTICE_SPACING).rewards(rots, trans, eps)
     moved = torch.tensor(src) @ torch.tensor(rots).transpose(1, 2) + torch.tensor(trans)[:, None]
     exact = max_consensus_reward(moved, torch.tensor(tgt), eps).numpy()
     np.testing.assert_allclose(fast, exact, atol=2e-3)
@@ -76,7 +75,7 @@ def test_cpu_costs_do_not_depend_on_the_order_of_the_points(bracket):
     from cemnet_ros.core.config import CEMConfig
     from cemnet_ros.core.scoring import CandidateScorer
 
-    order = nn_grid.locality_order(bracket)
+    order = locality_order(bracket)
     assert np.array_equal(np.sort(order), np.arange(len(bracket)))
     src = torch.tensor(bracket[:500], dtype=torch.float32)[None]
     tgt = torch.tensor(bracket[100:600] + 0.01, dtype=torch.float32)[None]

@@ -1,26 +1,50 @@
-"""Batched point-to-point ICP on torch tensors (brute-force correspondences; the CUDA/gradient path)."""
+"""Point-to-point ICP of one motion on numpy clouds: exact k-d tree correspondences, Kabsch (SVD) updates.
+
+The package's one such ICP: the optional final refinement of a registration (``refine_icp_steps``) and the
+classical baseline of the evaluation (:func:`cemnet_ros.eval.baselines.icp`). The CEM's own ICP steps run in
+numba on look-up lattices (:mod:`.lattice_rewards`), or batched in torch on CUDA (:mod:`.icp_torch`).
+"""
 from __future__ import annotations
 
-import torch
+from typing import Optional
 
-from .geometry_torch import procrustes, transform_points
-from .rewards import nearest_sq_distances
+import numpy as np
+from scipy.spatial import cKDTree
 
 
-def batch_icp(source: torch.Tensor, target: torch.Tensor, rotation: torch.Tensor, translation: torch.Tensor,
-              steps: int, max_distance: float | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """Refine motions (C, 3, 3), (C, 3) of source (C or 1, n, 3) onto target (C or 1, m, 3) by ``steps`` ICP steps.
+def kabsch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``R, t`` with ``target ~= R source + t`` for matched (n, 3) points (no reflection)."""
+    src_mean, tgt_mean = source.mean(0), target.mean(0)
+    cov = (source - src_mean).T @ (target - tgt_mean)
+    u, _, vt = np.linalg.svd(cov)
+    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T)) or 1.0])
+    rotation = vt.T @ fix @ u.T
+    return rotation, tgt_mean - rotation @ src_mean
 
-    Correspondences farther than ``max_distance`` are ignored; a motion with fewer than 3 left keeps its value.
+
+def point_to_point_icp(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
+                       max_iterations: int, max_distance: Optional[float] = None, tolerance: Optional[float] = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Refine ``target ~= rotation @ source + translation`` for (n, 3) and (m, 3) clouds by at most ``max_iterations``.
+
+    Each step pairs every moved source point with its nearest target point, drops the pairs farther than
+    ``max_distance`` (None: keeps all) and composes their Kabsch fit onto the motion; fewer than 3 pairs stop it.
+    ``tolerance``: stop as well once the mean pair distance improves by less (None: run every iteration).
     """
-    for _ in range(steps):
-        moved = transform_points(source, rotation, translation)
-        d2, idx = nearest_sq_distances(moved, target)
-        matched = torch.gather(target.expand(moved.shape[0], *target.shape[-2:]), 1,
-                               idx.unsqueeze(-1).expand(*idx.shape, 3))
-        weights = torch.ones_like(d2) if max_distance is None else (d2 <= max_distance ** 2).to(d2.dtype)
-        ok = weights.sum(-1) >= 3
-        new_rot, new_trans = procrustes(source.expand(moved.shape[0], *source.shape[-2:]), matched, weights)
-        rotation = torch.where(ok[:, None, None], new_rot, rotation)
-        translation = torch.where(ok[:, None], new_trans, translation)
+    source, target = np.asarray(source, dtype=np.float64), np.asarray(target, dtype=np.float64)
+    tree = cKDTree(target)
+    previous = np.inf
+    for _ in range(max_iterations):
+        moved = source @ rotation.T + translation
+        distances, index = tree.query(moved)
+        keep = np.ones(len(moved), dtype=bool) if max_distance is None else distances <= max_distance
+        if keep.sum() < 3:
+            break
+        step_r, step_t = kabsch(moved[keep], target[index[keep]])
+        rotation, translation = step_r @ rotation, step_r @ translation + step_t
+        if tolerance is not None:
+            error = float(distances[keep].mean())
+            if previous - error < tolerance:
+                break
+            previous = error
     return rotation, translation

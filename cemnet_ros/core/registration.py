@@ -9,12 +9,13 @@ from typing import Optional
 import numpy as np
 import torch
 
-from . import nn_grid
+from . import lattice_rewards
 from .checkpoint import load_network
 from .config import RegistrationConfig, seed_or_none
 from .engine import CEMNet
 from .geometry import euler_to_matrix_np, matrix_to_action_np
-from .scoring import consensus_fitness, refine_with_icp
+from .icp import point_to_point_icp
+from .lattice_rewards import consensus_fitness
 
 NETWORK_MIN_POINTS = 20  # the network's k-NN graph
 
@@ -78,7 +79,7 @@ class Registrar:
             network.batch_stats_at_inference = self.config.batchnorm == "batch"
         self.engine = CEMNet(self.config.cem, network, self.config.prior_sigma).to(self.device).eval()
         if self.device.type == "cpu":
-            nn_grid.compile_kernels()
+            lattice_rewards.compile_kernels()
 
     def _generator(self) -> torch.Generator | None:
         seed = seed_or_none(self.config.cem.seed)
@@ -106,8 +107,8 @@ class Registrar:
         fitness = np.empty(len(mu_np)) if fitness is None or refine else fitness.double().cpu().numpy()
         for b in range(len(mu_np)):
             if refine:
-                rotation[b], translation[b] = refine_with_icp(src_np[b], tgt_np[b], rotation[b], translation[b],
-                                                              cem.refine_icp_steps, cem.epsilon)
+                rotation[b], translation[b] = point_to_point_icp(src_np[b], tgt_np[b], rotation[b], translation[b],
+                                                                 cem.refine_icp_steps, max_distance=cem.epsilon)
                 mu_np[b] = matrix_to_action_np(np.block([[rotation[b], translation[b][:, None]], [0, 0, 0, 1]]))
             if refine or not run_cem:
                 fitness[b] = consensus_fitness(src_np[b], tgt_np[b], rotation[b], translation[b], cem.epsilon)

@@ -1,21 +1,19 @@
 """Scores CEM candidates of a batch of pairs: the cost D^mc, optionally fused with the after-ICP cost.
 
-Two interchangeable back ends: numba grid kernels on the CPU (:mod:`.nn_grid`) and brute-force torch on
-CUDA. Scores never carry gradients (the reference detaches them as well).
+Two interchangeable back ends: numba look-up lattices on the CPU (:mod:`.lattice_rewards`) and brute-force torch
+on CUDA. Scores never carry gradients (the reference detaches them as well).
 """
 from __future__ import annotations
 
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
 
-from . import nn_grid
 from .config import CEMConfig
-from .geometry_torch import action_to_rt, procrustes, transform_points
-from .icp import batch_icp
+from .geometry_torch import action_to_rt, transform_points
+from .icp_torch import batch_icp
+from .lattice import Lattice, build_lattice, locality_order
+from .lattice_rewards import LatticePair
 from .rewards import max_consensus_reward
-
-LATTICE_SPACING = CEMConfig.lattice_spacing  # default spacing (units of epsilon), for callers without a config
 
 
 class CandidateScorer:
@@ -27,15 +25,19 @@ class CandidateScorer:
         self.on_cpu = source.device.type == "cpu"
         if self.on_cpu:  # rewards are sums over points: any order gives them, Z-order gives them fastest
             spacing = cem.epsilon * cem.lattice_spacing
-            self._src_np, self._src_grids = _prepare_each(self.source, cem.epsilon, spacing)
-            self._tgt_np, self._tgt_grids = _prepare_each(self.target, cem.epsilon, spacing)
-            self._icp_grids: list | None = None  # built on the first fused iteration only
+            sources = _lattices(self.source, cem.epsilon, spacing)
+            targets = _lattices(self.target, cem.epsilon, spacing)
+            self._pairs = [LatticePair(s, t) for s, t in zip(sources, targets)]
+            self._with_icp_targets = False  # built on the first fused iteration only
 
-    def _icp_grid(self, b: int):
-        if self._icp_grids is None:
+    def _fused_pair(self, b: int) -> LatticePair:
+        if not self._with_icp_targets:
             spacing = self.cem.epsilon * self.cem.lattice_spacing
-            _, self._icp_grids = _prepare_each(self.target, self.cem.icp_radius, spacing, self._tgt_np)
-        return self._icp_grids[b]
+            clouds = [pair.target.cloud for pair in self._pairs]
+            for pair, icp_target in zip(self._pairs, _lattices(self.target, self.cem.icp_radius, spacing, clouds)):
+                pair.icp_target = icp_target
+            self._with_icp_targets = True
+        return self._pairs[b]
 
     def cost(self, candidates: torch.Tensor, fused: bool) -> torch.Tensor:
         """(B, N, 6) -> (B, N) cost 2 - reward; ``fused``: alpha * now + (1 - alpha) * after ICP."""
@@ -57,10 +59,8 @@ class CandidateScorer:
         rot, trans = np.ascontiguousarray(rot), np.ascontiguousarray(trans)
         cem = self.cem
         if fused:
-            return nn_grid.fused_batch(self._src_np[b], self._tgt_np[b], self._src_grids[b], self._icp_grid(b), rot,
-                                       trans, cem.epsilon, cem.icp_radius, cem.icp_steps, cem.alpha)
-        return nn_grid.consensus_batch(self._src_np[b], self._tgt_np[b], self._tgt_grids[b], self._src_grids[b], rot,
-                                       trans, cem.epsilon)
+            return self._fused_pair(b).fused_rewards(rot, trans, cem.epsilon, cem.icp_radius, cem.icp_steps, cem.alpha)
+        return self._pairs[b].rewards(rot, trans, cem.epsilon)
 
     def _reward_torch(self, b: int, rot: torch.Tensor, trans: torch.Tensor, fused: bool) -> torch.Tensor:
         src, tgt = self.source[b].double().unsqueeze(0), self.target[b].double().unsqueeze(0)
@@ -72,9 +72,8 @@ class CandidateScorer:
         return self.cem.alpha * now + (1.0 - self.cem.alpha) * after
 
 
-def _prepare_each(clouds: torch.Tensor, radius: float, spacing: float, ordered: list | None = None
-                  ) -> tuple[list, list]:
-    """Z-ordered float64 copies of a batch's clouds and their lattices; built once for a broadcast batch.
+def _lattices(clouds: torch.Tensor, radius: float, spacing: float, ordered: list | None = None) -> list[Lattice]:
+    """Lattices of a batch's clouds (Z-ordered float64 copies, or ``ordered``); built once for a broadcast batch.
 
     A batch made by ``expand`` (stride 0: every pair shares one cloud, e.g. hypotheses of one scan pair)
     gets one lattice, referenced B times.
@@ -83,40 +82,9 @@ def _prepare_each(clouds: torch.Tensor, radius: float, spacing: float, ordered: 
     count = 1 if shared else clouds.shape[0]
     if ordered is None:
         ordered = [_in_locality_order(clouds[b].double().numpy()) for b in range(count)]
-    grids = [nn_grid.build_grid(points, radius, spacing).astuple() for points in ordered[:count]]
-    if shared:
-        return ordered[:1] * clouds.shape[0], grids * clouds.shape[0]
-    return ordered, grids
+    lattices = [build_lattice(points, radius, spacing) for points in ordered[:count]]
+    return lattices * clouds.shape[0] if shared else lattices
 
 
 def _in_locality_order(points: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(points[nn_grid.locality_order(points)], dtype=np.float64)
-
-
-def refine_with_icp(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
-                    steps: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Optional final point-to-point ICP refinement of one motion (exact k-d tree correspondences within radius)."""
-    tree = cKDTree(target)
-    source_t = torch.as_tensor(source, dtype=torch.float64)
-    for _ in range(steps):
-        dist, idx = tree.query(source @ rotation.T + translation, distance_upper_bound=radius)
-        inliers = np.isfinite(dist)
-        if inliers.sum() < 3:
-            break
-        matched = torch.as_tensor(target[idx[inliers]], dtype=torch.float64)
-        rot, trans = procrustes(source_t[inliers][None], matched[None])
-        rotation, translation = rot[0].numpy(), trans[0].numpy()
-    return rotation, translation
-
-
-def consensus_fitness(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
-                      epsilon: float) -> float:
-    """Fitness in [0, 1]: the max-consensus reward of one motion divided by 2."""
-    src = np.ascontiguousarray(source, dtype=np.float64)
-    tgt = np.ascontiguousarray(target, dtype=np.float64)
-    spacing = epsilon * LATTICE_SPACING
-    reward = nn_grid.consensus_batch(src, tgt, nn_grid.build_grid(tgt, epsilon, spacing).astuple(),
-                                     nn_grid.build_grid(src, epsilon, spacing).astuple(),
-                                     np.ascontiguousarray(rotation, dtype=np.float64)[None],
-                                     np.ascontiguousarray(translation, dtype=np.float64)[None], epsilon)
-    return float(reward[0]) / 2.0
+    return np.ascontiguousarray(points[locality_order(points)], dtype=np.float64)

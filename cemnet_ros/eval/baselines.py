@@ -1,6 +1,7 @@
 """Classical baselines for the evaluation: point-to-point ICP and FPFH + RANSAC (+ ICP) via Open3D.
 
-Both return ``(R, t)`` with ``target ~= R @ source + t``. Open3D is an optional extra
+Both return ``(R, t)`` with ``target ~= R @ source + t``. The ICP is the package's one point-to-point ICP
+(:mod:`cemnet_ros.core.icp`, also the registration's optional refinement). Open3D is an optional extra
 (``pip install open3d-cpu``; on Debian it also needs ``apt-get install libusb-1.0-0``): without it
 :func:`fpfh_ransac` raises :class:`BaselineUnavailable` with that advice.
 """
@@ -10,7 +11,8 @@ from dataclasses import dataclass
 from typing import Optional, Tuple
 
 import numpy as np
-from scipy.spatial import cKDTree
+
+from cemnet_ros.core.icp import point_to_point_icp
 
 
 class BaselineUnavailable(RuntimeError):
@@ -52,40 +54,17 @@ def _as_points(points: np.ndarray, name: str) -> np.ndarray:
     return points
 
 
-def kabsch(source: np.ndarray, target: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Least-squares ``R, t`` with ``target ~= R source + t`` for matched (n, 3) points (no reflection)."""
-    src_mean, tgt_mean = source.mean(0), target.mean(0)
-    cov = (source - src_mean).T @ (target - tgt_mean)
-    u, _, vt = np.linalg.svd(cov)
-    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T)) or 1.0])
-    rotation = vt.T @ fix @ u.T
-    return rotation, tgt_mean - rotation @ src_mean
-
-
 def icp(source: np.ndarray, target: np.ndarray, config: Optional[ICPConfig] = None,
         init: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
-    """Point-to-point ICP (nearest neighbours in ``target`` via a k-d tree, SVD update)."""
+    """Point-to-point ICP from ``init`` (4x4, default identity): :func:`cemnet_ros.core.icp.point_to_point_icp`."""
     config = config or ICPConfig()
     source, target = _as_points(source, "source"), _as_points(target, "target")
-    tree = cKDTree(target)
     rotation, translation = np.eye(3), np.zeros(3)
     if init is not None:
         init = np.asarray(init, dtype=np.float64)
         rotation, translation = init[:3, :3].copy(), init[:3, 3].copy()
-    previous = np.inf
-    for _ in range(config.max_iterations):
-        moved = source @ rotation.T + translation
-        distances, index = tree.query(moved)
-        keep = np.ones(len(moved), dtype=bool) if config.max_distance is None else distances <= config.max_distance
-        if keep.sum() < 3:
-            break
-        step_r, step_t = kabsch(moved[keep], target[index[keep]])
-        rotation, translation = step_r @ rotation, step_r @ translation + step_t
-        error = float(distances[keep].mean())
-        if previous - error < config.tolerance:
-            break
-        previous = error
-    return rotation, translation
+    return point_to_point_icp(source, target, rotation, translation, config.max_iterations, config.max_distance,
+                              config.tolerance)
 
 
 def open3d_available() -> bool:

@@ -5,8 +5,9 @@ network and the CEM's epsilon live on the ModelNet unit sphere).
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from cemnet_ros.core.jit import kernel
 
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: multiply, keep the top bits
 SAMPLING_METHODS = ("random", "farthest")
@@ -40,7 +41,7 @@ def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
     return _voxel_centroids(np.ascontiguousarray(points, dtype=np.float64), float(voxel_size))
 
 
-@numba.njit
+@kernel
 def _finite_rows(points):
     """The rows of ``points`` whose coordinates are all finite, as float64 (two passes: count, copy)."""
     n = 0
@@ -56,7 +57,7 @@ def _finite_rows(points):
     return out
 
 
-@numba.njit
+@kernel
 def _rows_in_range(points, min_range, max_range):
     """The rows of ``points`` whose norm lies in [min_range, max_range] (norm summed as numpy does)."""
     keep = np.empty(points.shape[0], dtype=np.bool_)
@@ -75,7 +76,7 @@ def _rows_in_range(points, min_range, max_range):
     return out
 
 
-@numba.njit
+@kernel
 def _hash_slot(table, key, shift):
     """The row of ``table`` (key, value) holding ``key``, or the free row where it belongs (linear probing)."""
     mask = table.shape[0] - 1
@@ -85,7 +86,7 @@ def _hash_slot(table, key, shift):
     return j
 
 
-@numba.njit
+@kernel
 def _doubled(table, bits):
     """``table`` rehashed into twice as many rows (2^(bits + 1))."""
     bigger = np.full((2 * table.shape[0], 2), -1, dtype=np.int64)
@@ -97,7 +98,7 @@ def _doubled(table, bits):
     return bigger
 
 
-@numba.njit
+@kernel
 def _voxel_centroids(points, voxel_size):
     """Centroid per voxel floor(p / voxel_size), in one pass through a hash table of int64 voxel keys.
 

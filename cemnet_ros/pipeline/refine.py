@@ -18,8 +18,10 @@ from typing import Optional
 import numba
 import numpy as np
 
-from cemnet_ros.pipeline.voxel_map import FAST, VoxelMap, nearest_slot
+from cemnet_ros.core.jit import FASTMATH_INF_SAFE, kernel
+from cemnet_ros.pipeline.voxel_map import VoxelMap
 from cemnet_ros.pipeline.voxel_map import compile_kernels as compile_map_kernels
+from cemnet_ros.pipeline.voxel_query import nearest_slot
 
 CHUNKS_PER_THREAD = 4  # partial sums per thread, handed out dynamically: balances uneven chunks and threads
 N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs
@@ -38,7 +40,7 @@ class PolishResult:
     iterations: int  # Gauss-Newton steps taken
 
 
-@numba.njit(fastmath=FAST)
+@kernel(fastmath=FASTMATH_INF_SAFE)
 def _chunk_sums(source, lo, hi, rot, trans, max_distance, kernel_scale, view, normals, planarity, out):
     """Add the pairs of source[lo:hi] moved by (rot, trans) to ``out`` (N_SUMS,).
 
@@ -74,7 +76,7 @@ def _chunk_sums(source, lo, hi, rot, trans, max_distance, kernel_scale, view, no
         out[29] += 1.0
 
 
-@numba.njit(parallel=True)
+@kernel(parallel=True)
 def _normal_equations(source, rot, trans, max_distance, kernel_scale, view, normals, planarity, partial):
     """Per-chunk sums (rows of ``partial``, zeroed) over the pairs of ``source``, the chunks in parallel."""
     n, n_chunks = source.shape[0], partial.shape[0]
