@@ -1,6 +1,7 @@
 """Scan pipeline: preprocessing, motion model, covariance, worker queue and ScanAligner behaviour."""
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 
@@ -12,6 +13,7 @@ from street_scene import make_transform, make_world
 from cemnet_ros.core import CEMConfig, RegistrationConfig
 from cemnet_ros.pipeline.aligner import ScanAligner, ScanRejected
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
+from cemnet_ros.pipeline.input_checks import InputChecksConfig
 from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
 from cemnet_ros.pipeline.preprocess import (
     crop_range,
@@ -229,7 +231,7 @@ def test_stamp_backwards_restarts_and_duplicate_is_skipped():
 
 
 def test_too_few_points_is_rejected_without_touching_the_state():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(dataclasses.replace(FAST, checks=InputChecksConfig(min_count_ratio=0.0)))
     drive(aligner, [np.eye(4)])
     size = len(aligner.local_map)
     with pytest.raises(ScanRejected, match="too few points"):
@@ -238,6 +240,41 @@ def test_too_few_points_is_rejected_without_touching_the_state():
         aligner.process(np.full((100, 3), np.nan), PERIOD)
     assert len(aligner.local_map) == size
     assert aligner.process(scan_of(WORLD, make_transform(t=(0.5, 0, 0)), np.random.default_rng(1)), PERIOD).accepted
+
+
+def test_a_rejected_first_cloud_does_not_fix_the_scale():
+    aligner = ScanAligner(FAST)
+    two_spots = np.repeat([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], 30, axis=0)  # 60 points, 2 voxels
+    with pytest.raises(ScanRejected, match="after preprocessing"):
+        aligner.process(two_spots, 0)
+    assert aligner.scale is None
+    steps = drive(aligner, [np.eye(4), make_transform(t=(0.5, 0, 0))])
+    assert aligner.scale > 1.0 and steps[1].accepted
+
+
+def _tiny_start_then(aligner, poses):
+    """A first scan of 60 points within millimetres, then the street: the errors of the later steps."""
+    crumbs = np.random.default_rng(0).normal(size=(60, 3)) * 1e-3
+    assert aligner.process(crumbs, 0).accepted
+    rng = np.random.default_rng(2)
+    steps = [aligner.process(scan_of(WORLD, p, rng), (k + 1) * PERIOD) for k, p in enumerate(poses)]
+    return steps, [relative_error(poses, steps, k)[0] for k in range(1, len(poses))]
+
+
+def test_a_tiny_first_scan_is_replaced_by_the_first_representative_one():
+    poses = [make_transform(t=(0.5 * k, 0, 0)) for k in range(4)]
+    steps, errors = _tiny_start_then(ScanAligner(FAST), poses)
+    assert [kind for kind, _ in steps[0].warnings] == ["implausible_start"]
+    assert all(s.accepted for s in steps[1:]) and max(errors) < 0.05
+
+
+def test_a_lost_trajectory_measures_the_auto_scale_again():
+    config = dataclasses.replace(FAST, checks=InputChecksConfig(min_count_ratio=0.0))  # no count check
+    aligner = ScanAligner(config)
+    poses = [make_transform(t=(0.5 * k, 0, 0)) for k in range(config.recovery.restart_after + 4)]
+    steps, errors = _tiny_start_then(aligner, poses)
+    assert aligner.scale > 1.0
+    assert all(s.accepted for s in steps[-2:]) and max(errors[-2:]) < 0.05
 
 
 def corridor_points(rng, n=12000, half_length=40.0):

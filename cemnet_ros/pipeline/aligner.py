@@ -2,6 +2,7 @@
 
 Sequential mode registers each scan against a local map of the recent scans (:class:`VoxelMap`, odom frame):
 
+0. **check** the input's plausibility (:mod:`.input_checks`: stamp, frame, point count, size);
 1. **preprocess**: drop non-finite points, crop by range, voxel grid; the CEM's subset and the polish's subset;
 2. **predict**: the constant-velocity pose, and how far to search around it (:class:`AdaptiveSpread`);
 3. **track**: the CEM around the prediction against a sample of the map, then a point-to-plane polish
@@ -15,8 +16,9 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    the unconstrained directions, is flagged, and still extends the map.
 
 Units: the network and the CEM's epsilon live on the ModelNet unit sphere. Clouds are centred on the target
-sample's centroid and divided by ``scale`` (metres per network unit, auto: the robust radius of the first
-scan). Poses are ``T_odom_sensor``; odom is the first scan's sensor frame.
+sample's centroid and divided by ``scale`` (metres per network unit, auto: the robust radius of the scan that
+starts the trajectory, measured again when a lost trajectory restarts from a scan twice as large or small).
+Poses are ``T_odom_sensor``; odom is the first scan's sensor frame.
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.covariance import Conditioning, covariance_from_hessian, flat_covariance, keep_prediction_along
 from cemnet_ros.pipeline.deskew import deskew, se3_exp, se3_log
 from cemnet_ros.pipeline.health import HealthMonitor, Signals, disagreement
+from cemnet_ros.pipeline.input_checks import InputChecks, ScanRejected
 from cemnet_ros.pipeline.motion import ConstantVelocity
 from cemnet_ros.pipeline.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
 from cemnet_ros.pipeline.refine import PolishResult, point_to_plane_icp
@@ -44,10 +47,6 @@ from cemnet_ros.pipeline.voxel_map import VoxelMap
 TRACKING_PAIRING = 3.0  # frame voxels: the tracking polish pairs within the adaptive spread, at most this far
 LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
 POLISH_FRACTION = 0.8  # recovery: hypotheses whose CEM fitness is this close to the best one's get polished
-
-
-class ScanRejected(ValueError):
-    """A scan that cannot be aligned (e.g. too few points after preprocessing); the aligner state is unchanged."""
 
 
 @dataclass
@@ -67,6 +66,7 @@ class AlignmentStep:
     recovery_reason: str = ""  # why it ran (first pair, stamp gap, tracking failed, requested)
     degenerate: bool = False  # a direction was unconstrained: the prediction was kept along it
     signals: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)  # (kind, message) from the input checks (decimated, restarted)
 
 
 @dataclass
@@ -81,6 +81,8 @@ class Frame:
     polish: np.ndarray
     sampled: np.ndarray
     near: np.ndarray  # the voxel points within the CEM's radius (the global search draws from them)
+    scale: float  # metres per network unit this frame was prepared with
+    voxel: float  # its voxel size (m)
 
     @property
     def length(self) -> float:
@@ -124,6 +126,7 @@ class ScanAligner:
         self._registrar = registrar or Registrar(dataclasses.replace(self.config.registration, prior=reg_prior))
         self._fixed_scale = self.config.preprocess.scale if self.config.preprocess.scale > 0 else None
         self._pair_targets: dict[int, tuple[np.ndarray, VoxelMap]] = {}
+        self._checks = InputChecks(self.config.checks)
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
         refine.compile_kernels()
         self.reset()
@@ -168,25 +171,34 @@ class ScanAligner:
         self._skewed_input: Optional[tuple[np.ndarray, np.ndarray]] = None  # this scan, timed but not deskewed
         self._inserted: Optional[list] = None  # the map's scans while none could be deskewed (None: not tracked)
         self._last_dt_ns = 0  # the motion model's last time step
+        self._checks.forget_frame()
 
     def request_recovery(self) -> None:
         """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
         self._pending_recovery = "requested"
 
     # -- sequential mode ------------------------------------------------------------------------------------
-    def process(self, points: np.ndarray, stamp_ns: int, point_times: Optional[np.ndarray] = None) -> AlignmentStep:
+    def process(self, points: np.ndarray, stamp_ns: int, point_times: Optional[np.ndarray] = None,
+                frame_id: str = "", now_ns: Optional[int] = None, n_total: Optional[int] = None) -> AlignmentStep:
         """Register this scan against the local map and accumulate the pose.
 
-        ``point_times``: each point's time (s, relative to ``stamp_ns``, aligned with ``points``); with
-        ``config.preprocess.deskew`` the scan is first deskewed (see :meth:`_deskewed`). The pose is the one at
-        ``stamp_ns`` in any case.
+        The scan first passes the input checks (:mod:`.input_checks`; ``now_ns``: the caller's clock for the
+        future-stamp check; ``n_total``: the message's points when ``points`` are its finite ones); a rejected
+        one raises ScanRejected and changes nothing. ``point_times``: each
+        point's time (s, relative to ``stamp_ns``, aligned with ``points``); with ``config.preprocess.deskew``
+        the scan is first deskewed (see :meth:`_deskewed`). The pose is the one at ``stamp_ns`` in any case.
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
-        points, offset_ns = self._deskewed(points, point_times, stamp_ns)
+        admitted = self._checks.admit(points, point_times, stamp_ns, frame_id, now_ns, n_total)
+        if admitted.restart:
+            self.reset(self._pose)
+        points, offset_ns = self._deskewed(admitted.points, admitted.times, stamp_ns)
         before = self._last_stamp
         step = self._process_at(points, stamp_ns + offset_ns, start)
+        self._checks.passed(admitted, stamp_ns, frame_id)
         if before is not None and self._last_stamp != before:
             self._last_dt_ns = self._last_stamp - before  # the motion model's last time step
+        step.warnings = admitted.warnings
         return self._at_stamp(step, stamp_ns, offset_ns)
 
     def _process_at(self, points: np.ndarray, stamp_ns: int, start: float) -> AlignmentStep:
@@ -211,6 +223,7 @@ class ScanAligner:
         restarted = self._last_stamp is not None
         reason = (f"stamp went back {(self._last_stamp - stamp_ns) * 1e-9:.3f} s: restarted from this scan, "
                   "pose kept") if restarted else ""
+        self._adopt(frame)
         self._restart_map(frame, self._pose)
         self._motion.reset()
         self._motion.update(self._pose, stamp_ns)
@@ -253,7 +266,7 @@ class ScanAligner:
             reasons.append("motion prediction used")
             if self._failures_in_a_row >= self.config.recovery.restart_after:
                 reasons.append(f"lost for {self._failures_in_a_row} scans: the map restarts from this scan")
-                self._restart_map(frame, pose)
+                self._restart_map(self._rescaled_if_lost(frame), pose)
         else:
             self._failures_in_a_row = 0
             pose = estimate.T_odom_sensor
@@ -310,6 +323,7 @@ class ScanAligner:
         if cached is not None and cached[0] is target:
             return cached[1]
         frame = self._preprocess(target)
+        self._adopt(frame)
         target_map = self._new_map()
         target_map.update(frame.dense, np.zeros(3))
         self._pair_targets.clear()
@@ -396,26 +410,50 @@ class ScanAligner:
         self._published = step.pose
         return step
 
-    def _preprocess(self, points: np.ndarray) -> Frame:
-        """Metres, cropped and voxelised; the first scan fixes the auto scale. Raises ScanRejected."""
+    def _preprocess(self, points: np.ndarray, scale: Optional[float] = None) -> Frame:
+        """Metres, cropped and voxelised at ``scale`` (default: the aligner's; auto: this scan's robust radius).
+
+        Raises ScanRejected. The aligner adopts a frame's scale only once the scan is used (:meth:`_adopt`): a
+        rejected or implausible scan must not fix the units of the trajectory.
+        """
         cfg = self.config.preprocess
         cropped = crop_range(finite_points(points), cfg.min_range, cfg.max_range)
         if len(cropped) < cfg.min_points:
-            raise ScanRejected(f"too few points: {len(cropped)} after range crop, need {cfg.min_points}")
-        if self._scale is None:
-            radius = robust_radius(cropped)
-            if not radius > 0:
-                raise ScanRejected("degenerate cloud: all points coincide, cannot measure its scale")
-            self._scale = radius
-        self._voxel = max(cfg.voxel_size if cfg.voxel_size != 0 else self._scale / 100.0, 0.0)
-        dense = voxel_downsample(cropped, self._voxel)
+            raise ScanRejected(f"too few points: {len(cropped)} after range crop, need {cfg.min_points}",
+                               "too_few_points")
+        scale = self._scale if scale is None else scale
+        if scale is None:
+            scale = robust_radius(cropped)
+            if not scale > 0:
+                raise ScanRejected("degenerate cloud: all points coincide, cannot measure its scale", "degenerate")
+        voxel = max(cfg.voxel_size if cfg.voxel_size != 0 else scale / 100.0, 0.0)
+        dense = voxel_downsample(cropped, voxel)
         if len(dense) < cfg.min_points:
-            raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {cfg.min_points}")
+            raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {cfg.min_points}",
+                               "too_few_points")
         seed = max(self.config.registration.seed, 0)
-        near = dense[np.einsum("ij,ij->i", dense, dense) <= (cfg.cem_radius * self._scale) ** 2]
+        near = dense[np.einsum("ij,ij->i", dense, dense) <= (cfg.cem_radius * scale) ** 2]
         near = near if len(near) >= cfg.min_points else dense
         return Frame(dense, subsample(dense, self.config.polish.points, "random", seed),
-                     subsample(near, self.config.registration.n_points, cfg.sampling, seed), near)
+                     subsample(near, self.config.registration.n_points, cfg.sampling, seed), near, scale, voxel)
+
+    def _adopt(self, frame: Frame) -> None:
+        """The frame's units become the aligner's (the first scan of a trajectory, a pair target)."""
+        self._scale, self._voxel = frame.scale, frame.voxel
+
+    def _rescaled_if_lost(self, frame: Frame) -> Frame:
+        """Auto scale: a restart after being lost measures the scale again when this scan's differs by > 2x (the
+        trajectory may have started from a scan that was not representative)."""
+        if self._fixed_scale is not None or self._scale is None:
+            return frame
+        radius = robust_radius(frame.dense)
+        if not 0.5 * self._scale <= radius <= 2.0 * self._scale:
+            try:
+                frame = self._preprocess(frame.dense, scale=radius)
+            except ScanRejected:
+                return frame
+            self._adopt(frame)
+        return frame
 
     def _new_map(self) -> VoxelMap:
         voxel = self._voxel if self._voxel > 0 else self._scale / 100.0

@@ -1,7 +1,8 @@
 """Typed configuration of the scan pipeline: one schema (:mod:`cemnet_ros.schema`) for the node, the params
 file, the replay and the benchmarks.
 
-Sections by concern, named as the parameters are (``preprocess.max_range``): ``preprocess``, ``registration``
+Sections by concern, named as the parameters are (``preprocess.max_range``): ``checks`` (plausibility of
+the input), ``preprocess``, ``registration``
 (the tracking CEM, :mod:`cemnet_ros.core.config`), ``tracking`` (where it searches), ``adaptive`` (how widely),
 ``map``, ``polish``, ``health`` (the failure signals' limits) and ``recovery`` (the global search).
 """
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 from cemnet_ros.core.config import CEMConfig, GlobalSearchConfig, RegistrationConfig
 from cemnet_ros.pipeline.adaptive import AdaptiveConfig
 from cemnet_ros.pipeline.health import HealthConfig
+from cemnet_ros.pipeline.input_checks import InputChecksConfig
 from cemnet_ros.pipeline.preprocess import SAMPLING_METHODS
 from cemnet_ros.schema import param, section
 
@@ -118,6 +120,7 @@ class RecoveryConfig:
 class AlignerConfig:
     """Everything the scan pipeline needs; sections by concern."""
 
+    checks: InputChecksConfig = section(InputChecksConfig, "plausibility checks a scan passes first")
     preprocess: PreprocessConfig = section(PreprocessConfig, "what of a scan is used")
     registration: RegistrationConfig = section(odometry_registration, "the tracking CEM and its network")
     tracking: TrackingConfig = section(TrackingConfig, "where the tracking CEM searches")

@@ -1,8 +1,10 @@
-"""What the node reports on /diagnostics, as plain code: counters, input age and rate, and the status level.
+"""What the node reports on /diagnostics, as plain code: counters, input and decoded rates, and the level.
 
 Levels follow diagnostic_msgs/DiagnosticStatus (OK 0, WARN 1, ERROR 2). No input for ``input_timeout`` is a
-WARN, for 3x that an ERROR (Autoware's "no input source" check); new rejected inputs, drops, errors or flagged
-steps since the last report are a WARN.
+WARN, for 3x that an ERROR (Autoware's "no input source" check), and when publishers are matched on the input
+topic the message says that they publish but nothing arrives (the transport drops the clouds: the shipped DDS
+profile fixes that, docs/node.md); new rejected inputs, drops, errors or flagged steps since the last report are
+a WARN.
 """
 from __future__ import annotations
 
@@ -14,6 +16,24 @@ from typing import Any, Optional
 
 OK, WARN, ERROR = 0, 1, 2
 RATE_WINDOW_S = 5.0  # input rate over this many seconds
+SILENT_HINT = ("large clouds need the shipped DDS profile on both sides: export FASTRTPS_DEFAULT_PROFILES_FILE="
+               "<share>/cemnet_ros/config/fastdds_large_data.xml (docs/node.md: Large clouds)")
+
+
+class _Rate:
+    """Events per second over the last RATE_WINDOW_S (not thread-safe: NodeStatus locks)."""
+
+    def __init__(self) -> None:
+        self.times: collections.deque = collections.deque()
+
+    def add(self, now: float) -> None:
+        self.times.append(now)
+        while self.times and self.times[0] < now - RATE_WINDOW_S:
+            self.times.popleft()
+
+    def per_second(self, now: float, span: float) -> float:
+        recent = sum(1 for t in self.times if t >= now - RATE_WINDOW_S)
+        return recent / span if span > 0 else 0.0
 
 
 @dataclass
@@ -31,8 +51,11 @@ class NodeStatus:
         self._clock = clock
         self._lock = threading.Lock()
         self._started = clock()
-        self._arrivals: collections.deque = collections.deque()
+        self._arrivals, self._decoded = _Rate(), _Rate()
         self.rejected: collections.Counter = collections.Counter()
+        self.warned: collections.Counter = collections.Counter()  # admitted with a warning (decimated, ...)
+        self.received = 0
+        self.published = 0
         self.flagged = 0
         self.recoveries = 0
         self.ready = False  # the engine has loaded
@@ -41,10 +64,19 @@ class NodeStatus:
 
     def input_arrived(self) -> None:
         with self._lock:
-            now = self._clock()
-            self._arrivals.append(now)
-            while self._arrivals and self._arrivals[0] < now - RATE_WINDOW_S:
-                self._arrivals.popleft()
+            self.received += 1
+            self._arrivals.add(self._clock())
+
+    def decoded(self) -> None:
+        """The worker took a message out of the queue and decoded it."""
+        with self._lock:
+            self._decoded.add(self._clock())
+
+    def warn(self, kind: str) -> int:
+        """Count a scan admitted with a warning of ``kind``; its count so far."""
+        with self._lock:
+            self.warned[kind] += 1
+            return self.warned[kind]
 
     def reject(self, kind: str) -> int:
         """Count a rejected input; its count so far."""
@@ -55,39 +87,34 @@ class NodeStatus:
     def step_done(self, step: Any) -> None:
         with self._lock:
             self.last_step = step
+            self.published += 1
             self.recoveries += int(step.recovered)
             self.flagged += int(not step.accepted)
 
     def input_age(self) -> Optional[float]:
         """Seconds since the last input (None: none yet)."""
         with self._lock:
-            return None if not self._arrivals else self._clock() - self._arrivals[-1]
+            return None if not self._arrivals.times else self._clock() - self._arrivals.times[-1]
 
-    def report(self, queue: Any, scale: Optional[float]) -> Report:
-        """The status now; ``queue`` is the worker's :class:`~cemnet_ros.pipeline.worker.WorkerStats`."""
+    def report(self, queue: Any, scale: Optional[float], publishers: int = 0) -> Report:
+        """The status now; ``queue`` is the worker's :class:`~cemnet_ros.pipeline.worker.WorkerStats`,
+        ``publishers`` the number matched on the input topic."""
         with self._lock:
             now = self._clock()
             rejected, flagged, step, recoveries = dict(self.rejected), self.flagged, self.last_step, self.recoveries
-            last = self._arrivals[-1] if self._arrivals else None
-            recent = [t for t in self._arrivals if t >= now - RATE_WINDOW_S]
+            warned, published, received = dict(self.warned), self.published, self.received
+            last = self._arrivals.times[-1] if self._arrivals.times else None
             span = min(RATE_WINDOW_S, now - self._started)
-            rate = len(recent) / span if span > 0 else 0.0
+            rate, decoded_rate = self._arrivals.per_second(now, span), self._decoded.per_second(now, span)
             counts = (sum(rejected.values()), queue.drops, queue.errors, flagged)
             previous, self._previous = self._previous, counts
         age = now - (last if last is not None else self._started)
-        problems = [label for label, c, p in zip(("rejected inputs", "dropped scans", "registration errors",
-                                                   "flagged steps"), counts, previous) if c > p]
-        level, message = (WARN, "new " + ", ".join(problems)) if problems else (OK, "ok")
-        if not self.ready:
-            level, message = max(level, WARN), "loading the engine; " + message
-        if age > 3.0 * self.input_timeout:
-            level, message = ERROR, f"no input for {age:.1f} s"
-        elif age > self.input_timeout:
-            level, message = max(level, WARN), f"no input for {age:.1f} s"
+        level, message = self._level(counts, previous, age, publishers)
         values = {
             "input_age_s": "" if last is None else round(age, 3), "input_rate_hz": round(rate, 2),
+            "decoded_rate_hz": round(decoded_rate, 2), "input_publishers": publishers, "received": received,
             "engine_ready": self.ready, "queue_depth": queue.depth, "queue_drops": queue.drops,
-            "processed": queue.processed, "errors": queue.errors,
+            "processed": published, "errors": queue.errors,
             "latency_last_ms": round(queue.latency_last_s * 1e3, 1),
             "latency_mean_ms": round(queue.latency_mean_s * 1e3, 1),
             "latency_max_ms": round(queue.latency_max_s * 1e3, 1),
@@ -98,4 +125,20 @@ class NodeStatus:
             value = "" if step is None else getattr(step, name)
             values["last_" + name] = round(value, 4) if isinstance(value, float) else value
         values.update({f"rejected_{kind}": count for kind, count in sorted(rejected.items())})
+        values.update({f"warned_{kind}": count for kind, count in sorted(warned.items())})
         return Report(level, message, values)
+
+    def _level(self, counts: tuple, previous: tuple, age: float, publishers: int) -> tuple[int, str]:
+        problems = [label for label, c, p in zip(("rejected inputs", "dropped scans", "registration errors",
+                                                   "flagged steps"), counts, previous) if c > p]
+        level, message = (WARN, "new " + ", ".join(problems)) if problems else (OK, "ok")
+        if not self.ready:
+            level, message = max(level, WARN), "loading the engine; " + message
+        silence = f"no input for {age:.1f} s"
+        if publishers:
+            silence += f" although {publishers} publisher(s) are matched: {SILENT_HINT}"
+        if age > 3.0 * self.input_timeout:
+            level, message = ERROR, silence
+        elif age > self.input_timeout:
+            level, message = max(level, WARN), silence
+        return level, message

@@ -1,0 +1,203 @@
+"""Plausibility checks a scan passes before it may move the trajectory (no ROS: the node and the replay share it).
+
+A registration can be judged only against a reference, and a reference is only as good as the scans that made
+it: a scan with a fraction of the usual points (a sector, NaN-filled, another sensor's), a corrupt stamp or a
+foreign frame would be aligned somewhere and, worse, could become the reference. So each scan is checked first:
+
+- **stamp**: nanoseconds within a second; not beyond ``future_tolerance`` ahead of the caller's clock; a jump of
+  more than ``stamp_jump`` (or 20 periods) either way is refused unless the next scan confirms the new time base;
+- **frame**: the trajectory's frame_id is the first scan's; another one is refused until a reset;
+- **point count**: finite points against the running median of the recent scans (``min_count_ratio``), the
+  azimuth sectors they cover against the recent coverage (``min_coverage_ratio``: a cropped sector), the share
+  of non-finite points against its recent level (``max_nonfinite_rise``); when a level stays unmet for
+  ``relevel_after`` scans the sensor has changed and the levels restart, with a warning; a trajectory that
+  began on a scan far smaller than the next ones restarts from the first representative one;
+- **size**: more than ``max_points`` finite points are decimated (seeded), with a warning, never silently slow.
+
+Rejections raise :class:`ScanRejected` with a ``kind`` the node counts; warnings travel with the admitted scan.
+"""
+from __future__ import annotations
+
+import collections
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from cemnet_ros.schema import param
+
+SECTORS = 36  # azimuth bins of the coverage check
+EARLY_LEVEL = 3  # a level from fewer scans than this may rest on an implausible start
+UPWARD_RATIO = 4.0  # ... which shows as the next scan having this many times the points
+
+
+class ScanRejected(ValueError):
+    """A scan that cannot be aligned; the aligner state is unchanged. ``kind`` names the check (for counting)."""
+
+    def __init__(self, message: str, kind: str = "preprocessing") -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass
+class InputChecksConfig:
+    """Limits of the plausibility checks (docs/node.md: Input checks)."""
+
+    max_points: int = param(400_000, "more finite points than this are decimated to it, with a warning; 0 = no cap",
+                            low=0)
+    min_count_ratio: float = param(0.35, "a scan with fewer finite points than this fraction of the recent median "
+                                   "is rejected; 0 = off (with the two checks below)", low=0.0, high=1.0)
+    min_coverage_ratio: float = param(0.5, "... or covering fewer azimuth sectors (of 36) than this fraction of "
+                                      "the recent median", low=0.0, high=1.0)
+    max_nonfinite_rise: float = param(0.25, "... or whose share of non-finite points exceeds the recent median "
+                                      "share by more than this", low=0.0, high=1.0)
+    level_window: int = param(20, "scans in the running point-count median", low=1, high=1000)
+    relevel_after: int = param(10, "after this many consecutive low-count scans the median restarts from them",
+                               low=1)
+    future_tolerance: float = param(10.0, "a stamp more than this (s) ahead of the node's clock is rejected; "
+                                    "0 = off", low=0.0)
+    stamp_jump: float = param(30.0, "a stamp more than this (s, and 20 periods) from the last one is rejected "
+                              "unless the next scan confirms it; 0 = off", low=0.0)
+
+
+@dataclass
+class Admitted:
+    """A scan that passed: its points (decimated if capped), what to tell the user, and whether the
+    trajectory must restart from it (it began on an implausible scan)."""
+
+    points: np.ndarray
+    times: Optional[np.ndarray]
+    n_finite: int
+    coverage: float  # fraction of the azimuth sectors with points
+    nonfinite: float  # share of the message's points that were not finite
+    warnings: list[tuple[str, str]] = field(default_factory=list)  # (kind, message)
+    restart: bool = False
+
+
+def stamp_ns(sec: int, nanosec: int) -> int:
+    """A header stamp in ns; ScanRejected when ``nanosec`` is not within a second (it would shift the stamp)."""
+    if not 0 <= int(nanosec) < 1_000_000_000:
+        raise ScanRejected(f"stamp nanosec {nanosec} is not in [0, 1e9)", "stamp")
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
+class InputChecks:
+    """The checks' state: the recent point counts and stamps, and the trajectory's frame."""
+
+    def __init__(self, config: InputChecksConfig) -> None:
+        self.config = config
+        self._levels: collections.deque = collections.deque(maxlen=config.level_window)  # (count, coverage, nonfinite)
+        self._low_in_a_row = 0
+        self._frame_id: Optional[str] = None
+        self._last_stamp: Optional[int] = None
+        self._periods: collections.deque = collections.deque(maxlen=9)
+        self._pending_jump: Optional[int] = None  # a refused jump's stamp, confirmed by a scan just after it
+
+    def forget_frame(self) -> None:
+        """A reset: the next scan's frame (and stamps) start the trajectory; the sensor's count level stays."""
+        self._frame_id, self._last_stamp, self._pending_jump = None, None, None
+        self._periods.clear()
+
+    def admit(self, points: np.ndarray, times: Optional[np.ndarray], stamp_ns: int, frame_id: str = "",
+              now_ns: Optional[int] = None, n_total: Optional[int] = None) -> Admitted:
+        """Check one scan (raises ScanRejected); call :meth:`passed` once the pipeline has used it.
+
+        ``n_total``: the points in the message when ``points`` holds only its finite ones (as decoded)."""
+        self._check_stamp(stamp_ns, now_ns)
+        if frame_id and self._frame_id is not None and frame_id != self._frame_id:
+            raise ScanRejected(f"frame_id {frame_id!r} is not the trajectory's {self._frame_id!r}: refused (a reset "
+                               "starts over in the new frame)", "frame_id")
+        finite = np.all(np.isfinite(points), axis=1)
+        n_finite = int(np.count_nonzero(finite))
+        n_total = max(len(points) if n_total is None else int(n_total), 1)
+        admitted = Admitted(points, times, n_finite, _coverage(points[finite]), 1.0 - n_finite / n_total)
+        self._check_levels(admitted)
+        self._cap(admitted, finite)
+        return admitted
+
+    def passed(self, admitted: Admitted, stamp_ns: int, frame_id: str = "") -> None:
+        """The scan was used: it joins the count level, its stamp and frame become the reference."""
+        if admitted.restart:
+            self._levels.clear()
+        self._levels.append((admitted.n_finite, admitted.coverage, admitted.nonfinite))
+        self._low_in_a_row = 0
+        if self._last_stamp is not None and stamp_ns > self._last_stamp:
+            self._periods.append(stamp_ns - self._last_stamp)
+        self._last_stamp, self._pending_jump = stamp_ns, None
+        self._frame_id = frame_id or self._frame_id
+
+    def _check_stamp(self, stamp_ns: int, now_ns: Optional[int]) -> None:
+        cfg = self.config
+        if stamp_ns < 0:
+            raise ScanRejected(f"stamp {stamp_ns * 1e-9:.3f} s is negative", "stamp")
+        if now_ns is not None and cfg.future_tolerance > 0 and stamp_ns > now_ns + cfg.future_tolerance * 1e9:
+            raise ScanRejected(f"stamp {stamp_ns * 1e-9:.3f} s is {(stamp_ns - now_ns) * 1e-9:.1f} s ahead of the "
+                               "clock", "stamp_future")
+        if self._last_stamp is None or cfg.stamp_jump <= 0:
+            return
+        period = float(np.median(self._periods)) if self._periods else 0.0
+        limit = max(cfg.stamp_jump * 1e9, 20.0 * period)
+        jump = stamp_ns - self._last_stamp
+        if abs(jump) <= limit:
+            return
+        pending, self._pending_jump = self._pending_jump, stamp_ns
+        if pending is not None and 0 < stamp_ns - pending <= max(3.0 * period, 1e9):
+            return  # the new time base is confirmed: the aligner sees a gap (or a restart) and handles it
+        raise ScanRejected(f"stamp jumped {jump * 1e-9:+.3f} s from the last scan: refused unless the next scan "
+                           "follows it", "stamp_jump")
+
+    def _check_levels(self, admitted: Admitted) -> None:
+        cfg, n = self.config, admitted.n_finite
+        if not self._levels or cfg.min_count_ratio <= 0:
+            return
+        count, coverage, nonfinite = np.median(np.asarray(self._levels), axis=0)
+        if len(self._levels) < EARLY_LEVEL and n > UPWARD_RATIO * count:
+            admitted.restart = True
+            admitted.warnings.append(("implausible_start", f"the trajectory began on scans of ~{count:.0f} points, "
+                                      f"this one has {n}: restarted from it (pose kept)"))
+            return
+        fault = _level_fault(admitted, cfg, count, coverage, nonfinite)
+        if fault is None:
+            return
+        self._low_in_a_row += 1
+        if self._low_in_a_row < cfg.relevel_after:
+            raise ScanRejected(fault[1], fault[0])
+        self._levels.clear()
+        admitted.warnings.append(("relevel", f"{self._low_in_a_row} scans in a row: {fault[1]}: the sensor "
+                                  "changed, the levels restart from this scan"))
+
+    def _cap(self, admitted: Admitted, finite: np.ndarray) -> None:
+        cap = self.config.max_points
+        if cap <= 0 or admitted.n_finite <= cap:
+            return
+        keep = np.flatnonzero(finite)
+        keep = np.sort(np.random.default_rng(0).choice(keep, cap, replace=False))
+        admitted.warnings.append(("decimated", f"{admitted.n_finite} finite points decimated to {cap} "
+                                  "(input.max_points)"))
+        admitted.points = admitted.points[keep]
+        admitted.times = None if admitted.times is None else admitted.times[keep]
+
+
+def _coverage(points: np.ndarray) -> float:
+    """Fraction of the SECTORS azimuth sectors holding at least 2 % of a uniform share of the points (>= 3)."""
+    if not len(points):
+        return 0.0
+    azimuth = np.arctan2(points[:, 1], points[:, 0])
+    sector = np.minimum(((azimuth + np.pi) * (SECTORS / (2 * np.pi))).astype(np.int64), SECTORS - 1)
+    counts = np.bincount(sector, minlength=SECTORS)
+    return float(np.mean(counts >= max(3.0, 0.02 * len(points) / SECTORS)))
+
+
+def _level_fault(admitted: Admitted, cfg: InputChecksConfig, count: float, coverage: float,
+                 nonfinite: float) -> Optional[tuple[str, str]]:
+    """(kind, message) of the first level the scan falls short of, None when it meets them all."""
+    n = admitted.n_finite
+    if n < cfg.min_count_ratio * count:
+        return "point_count", f"{n} finite points, {n / count:.0%} of the recent median {count:.0f}"
+    if admitted.coverage < cfg.min_coverage_ratio * coverage:
+        return "coverage", (f"points in {admitted.coverage:.0%} of the azimuth sectors where {coverage:.0%} is "
+                            "usual (a cropped sector?)")
+    if admitted.nonfinite > nonfinite + cfg.max_nonfinite_rise:
+        return "non_finite", (f"{admitted.nonfinite:.0%} of the points are not finite where {nonfinite:.0%} is "
+                              "usual")
+    return None
