@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cemnet_ros.io.atomic import atomic_write_text
-from cemnet_ros.io.pointcloud_files import lzf_decompress, read_points, write_ply
+from cemnet_ros.io.pointcloud_files import PointCloudFileError, lzf_decompress, read_points, write_ply
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 RNG = np.random.default_rng(7)
@@ -94,7 +94,7 @@ def test_nan_rows_dropped_with_warning(tmp_path):
 
 def test_all_nan_is_an_error(tmp_path):
     np.save(tmp_path / "nan.npy", np.full((4, 3), np.nan))
-    with pytest.warns(UserWarning), pytest.raises(ValueError, match="no \\(finite\\) points"):
+    with pytest.raises(PointCloudFileError, match="no \\(finite\\) points: all 4 have NaN"):
         read_points(tmp_path / "nan.npy")
 
 

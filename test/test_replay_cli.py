@@ -151,8 +151,10 @@ def test_replay_reports_rejected_scans_and_goes_on(tmp_path, capsys):
                  "--no-plot"]) == 0
     summary = _summary(out)
     assert summary["scans"] == 3
-    assert [r["index"] for r in summary["rejected"]] == [1] and "too few points" in summary["rejected"][0]["reason"]
-    assert "rejected scans: 1" in capsys.readouterr().out
+    assert [r["index"] for r in summary["rejected"]] == [1] and "10" in summary["rejected"][0]["reason"]
+    assert summary["skipped_count"] == 1 and summary["skipped"][0]["reason"] == summary["rejected"][0]["reason"]
+    report = capsys.readouterr().out
+    assert "rejected scans: 1" in report and "skipped 1 of 4 messages: 1 " in report
 
 
 @pytest.mark.parametrize("argv, message", [

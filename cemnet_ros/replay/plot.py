@@ -21,6 +21,19 @@ def _plane_axes(positions: np.ndarray) -> tuple[int, int]:
     return int(a), int(b)
 
 
+def _plot_rpe(axes, rpe: RPEResult) -> None:
+    """Per-pair translation (cm) and rotation (deg) errors on two axes."""
+    pairs = np.arange(1, len(rpe.trans_errors) + 1)
+    for axis, values, color, what in ((axes[0], rpe.trans_errors * 100.0, "tab:blue", "translation error [cm]"),
+                                      (axes[1], rpe.rot_errors_deg, "tab:orange", "rotation error [deg]")):
+        axis.plot(pairs, values, "o-", color=color, ms=3)
+        axis.set_xlabel("pair (scan i-1 -> i)")
+        axis.set_ylabel(what)
+        axis.set_title(f"relative {what.split()[0]} error")
+        axis.grid(alpha=0.3)
+        axis.set_ylim(bottom=0)
+
+
 def save_replay_plot(path: str | os.PathLike, estimate: np.ndarray, ground_truth: Optional[np.ndarray] = None,
                      rpe: Optional[RPEResult] = None, title: str = "") -> Path:
     """Write the figure atomically. ``estimate``/``ground_truth``: (n,4,4) poses, the estimate already
@@ -47,18 +60,7 @@ def save_replay_plot(path: str | os.PathLike, estimate: np.ndarray, ground_truth
     ax.legend(loc="best", fontsize=8)
     ax.set_title(title or "trajectory (top-down)")
     if has_rpe:
-        pairs = np.arange(1, len(rpe.trans_errors) + 1)
-        axes[1].plot(pairs, rpe.trans_errors * 100.0, "o-", color="tab:blue", ms=3)
-        axes[1].set_xlabel("pair (scan i-1 -> i)")
-        axes[1].set_ylabel("translation error [cm]")
-        axes[1].set_title("relative translation error")
-        axes[2].plot(pairs, rpe.rot_errors_deg, "o-", color="tab:orange", ms=3)
-        axes[2].set_xlabel("pair (scan i-1 -> i)")
-        axes[2].set_ylabel("rotation error [deg]")
-        axes[2].set_title("relative rotation error")
-        for axis in axes[1:]:
-            axis.grid(alpha=0.3)
-            axis.set_ylim(bottom=0)
+        _plot_rpe(axes[1:], rpe)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
     path = Path(path)

@@ -14,6 +14,7 @@ import numpy as np
 from cemnet_ros.core import register
 from cemnet_ros.core.checkpoint import CheckpointError
 from cemnet_ros.io.pointcloud_files import read_points
+from cemnet_ros.tools.cli_errors import reported_errors
 from cemnet_ros.tools.engine_args import add_engine_args, config_from_args
 
 PROG = "cemnet-register"
@@ -52,14 +53,13 @@ def resolve_scale(text: str, source: np.ndarray, target: np.ndarray) -> float:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
+    with reported_errors(PROG, CheckpointError) as outcome:
         config = config_from_args(args)
         source, target = read_points(args.source), read_points(args.target)
         scale = resolve_scale(args.scale, source, target)
         result = register(source / scale, target / scale, config)
-    except (FileNotFoundError, ValueError, CheckpointError) as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
+    if outcome.code:
+        return outcome.code
     transform = result.transform
     transform[:3, 3] *= scale
     sigma = result.sigma.copy()

@@ -13,6 +13,7 @@ from typing import Optional, Sequence
 
 from cemnet_ros.core.checkpoint import CheckpointError
 from cemnet_ros.schema import add_arguments, build, parameters, parsed_overrides
+from cemnet_ros.tools.cli_errors import reported_errors
 from cemnet_ros.train import distributed as ddp
 from cemnet_ros.train.config import CPU_PRESET, TrainConfig, cpu_preset
 
@@ -60,16 +61,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from cemnet_ros.train.trainer import Trainer  # heavy imports after argument checks
 
     try:
-        if info.is_main:
-            print(f"cemnet-train: world size {info.world_size}, device {info.device}, batch {config.batch_size}, "
-                  f"N={config.cem.n_candidates}, T={config.cem.n_iters}, val N={config.val_cem.n_candidates}, "
-                  f"epochs {config.epochs}, lr {config.lr}", flush=True)
-        rows = Trainer(config, info).fit()
-    except (FileNotFoundError, ValueError, CheckpointError) as exc:
-        print(f"cemnet-train: {exc}", file=sys.stderr)
-        return 2
+        with reported_errors("cemnet-train", CheckpointError) as outcome:  # e.g. an unreadable scan file
+            if info.is_main:
+                print(f"cemnet-train: world size {info.world_size}, device {info.device}, batch {config.batch_size}, "
+                      f"N={config.cem.n_candidates}, T={config.cem.n_iters}, val N={config.val_cem.n_candidates}, "
+                      f"epochs {config.epochs}, lr {config.lr}", flush=True)
+            rows = Trainer(config, info).fit()
     finally:
         ddp.shutdown(info)
+    if outcome.code:
+        return outcome.code
     if info.is_main and rows:
         print(f"cemnet-train: {len(rows)} epoch(s) logged in {args.out}/log.csv", flush=True)
     return 0
