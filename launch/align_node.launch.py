@@ -4,11 +4,15 @@
     ros2 launch cemnet_ros align_node.launch.py bag:=my_run.mcap use_sim_time:=true rviz:=false
 
 ``ros2 launch cemnet_ros align_node.launch.py --show-args`` lists the arguments. See docs/install_ros.md.
+
+Every process started here (the node, RViz2, the bag player, and a driver included in this launch) uses the
+package's Fast DDS profile for large clouds (``dds_profile``; docs/node.md: Large clouds) unless the shell
+already names one in FASTRTPS_DEFAULT_PROFILES_FILE.
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument, ExecuteProcess
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, SetEnvironmentVariable
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration, NotEqualsSubstitution
 from launch_ros.actions import Node
@@ -37,6 +41,11 @@ def generate_launch_description():
                               description="child frame of the odometry and the TF"),
         DeclareLaunchArgument("rviz", default_value="true",
                               description="start RViz2 with the package's view"),
+        DeclareLaunchArgument("dds_profile",
+                              default_value=os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or
+                              os.path.join(share, "config", "fastdds_large_data.xml"),
+                              description="Fast DDS profile (shared memory large enough for full-size scans); "
+                                          "'' = Fast DDS's defaults"),
         DeclareLaunchArgument("bag", default_value="",
                               description="rosbag2 to replay with 'ros2 bag play <bag> --clock' ('' = none); "
                                           "also set use_sim_time:=true, and input_topic to the bag's cloud topic"),
@@ -75,4 +84,5 @@ def generate_launch_description():
         condition=IfCondition(NotEqualsSubstitution(bag, "")),
     )
 
-    return LaunchDescription(arguments + [align_node, rviz, bag_play])
+    dds_profile = SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE", LaunchConfiguration("dds_profile"))
+    return LaunchDescription(arguments + [dds_profile, align_node, rviz, bag_play])

@@ -16,7 +16,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 
 import rclpy  # noqa: E402
 from builtin_interfaces.msg import Time  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
@@ -90,10 +90,12 @@ class Harness:
         self.node = AlignNode(context=context, namespace=namespace, parameter_overrides=params)
         self.probe = rclpy.create_node("probe", namespace=namespace, context=context)
         self.odometry, self.poses, self.clouds, self.diagnostics, self.logs, self.tfs = [], [], [], [], [], []
+        self.statuses = []  # ~/scan_status: one verdict per input message
         self.namespace = namespace
         ns = f"/{namespace}/align_node"
         self.probe.create_subscription(Odometry, f"{ns}/odometry", self.odometry.append, 50)
         self.probe.create_subscription(PoseStamped, f"{ns}/pose", self.poses.append, 50)
+        self.probe.create_subscription(DiagnosticStatus, f"{ns}/scan_status", self.statuses.append, 200)
         self.probe.create_subscription(PointCloud2, f"{ns}/aligned_cloud", self.clouds.append, 50)
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
         self.probe.create_subscription(Log, "/rosout", self._on_log, 100)

@@ -126,3 +126,15 @@ def test_a_huge_cloud_is_decimated_with_its_times_and_a_warning():
     assert admitted.warnings[0][0] == "decimated"
     index = np.searchsorted(times, admitted.times)
     assert np.array_equal(cloud[index], admitted.points)  # points and times stay paired
+
+
+def test_an_out_of_order_stamp_is_refused_and_a_confirmed_step_back_passes():
+    checks = InputChecks(InputChecksConfig())
+    last = _stream(checks)
+    with pytest.raises(ScanRejected) as info:
+        checks.admit(_cloud(1000), None, last - PERIOD // 2, "lidar")
+    assert info.value.kind == "stamp_back"
+    checks.admit(_cloud(1000), None, last + PERIOD, "lidar")  # the stream goes on
+    with pytest.raises(ScanRejected):
+        checks.admit(_cloud(1000), None, 0, "lidar")  # a bag loop ...
+    checks.admit(_cloud(1000), None, PERIOD, "lidar")  # ... confirmed by the next scan

@@ -218,14 +218,16 @@ def test_stamp_gap_and_request_trigger_the_global_search():
     assert step.recovered and step.recovery_reason == "requested" and step.accepted
 
 
-def test_stamp_backwards_restarts_and_duplicate_is_skipped():
+def test_stamp_backwards_is_refused_once_then_restarts_and_duplicate_is_skipped():
     aligner = ScanAligner(FAST)
     poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(3)]
     steps = drive(aligner, poses, stamps=[1000 + k * PERIOD for k in range(3)])
     dup = aligner.process(scan_of(WORLD, poses[-1], np.random.default_rng(0)), 1000 + 2 * PERIOD)
     assert not dup.accepted and "duplicate" in dup.reason
     np.testing.assert_array_equal(dup.pose, steps[-1].pose)
-    back = aligner.process(scan_of(WORLD, poses[-1], np.random.default_rng(0)), 500)
+    with pytest.raises(ScanRejected, match="went back"):  # out of order, or a new time base: the next one says
+        aligner.process(scan_of(WORLD, poses[-1], np.random.default_rng(0)), 500)
+    back = aligner.process(scan_of(WORLD, poses[-1], np.random.default_rng(0)), 500 + PERIOD)
     assert not back.accepted and "back" in back.reason and back.relative is None
     np.testing.assert_array_equal(back.pose, steps[-1].pose)
 

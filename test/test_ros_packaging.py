@@ -211,7 +211,7 @@ def test_launch_arguments_and_defaults():
     arguments = _declared_arguments(_launch_tree())
     defaults = {name: _constant(default) for name, (default, _) in arguments.items()}
     assert defaults == {"input_topic": "points", "params_file": None, "use_sim_time": "false", "odom_frame": "odom",
-                        "base_frame": "base_link", "rviz": "true", "bag": ""}
+                        "base_frame": "base_link", "rviz": "true", "bag": "", "dds_profile": None}
     assert all(description for _, description in arguments.values()), "every argument has a description"
     assert "use_sim_time:=true" in arguments["bag"][1]
 
@@ -261,7 +261,7 @@ def test_default_params_file_is_the_installed_share_copy():
 def test_files_the_launch_file_takes_from_its_share_exist_and_are_installed():
     tree = _launch_tree()
     paths = {_share_path(node, tree) for node in ast.walk(tree)} - {None}
-    assert paths == {"config/align_node.yaml", "rviz/cemnet_ros.rviz"}
+    assert paths == {"config/align_node.yaml", "config/fastdds_large_data.xml", "rviz/cemnet_ros.rviz"}
     installed = _installed_files()
     for relative in paths:
         assert (REPO / relative).is_file(), relative

@@ -4,8 +4,9 @@ A registration can be judged only against a reference, and a reference is only a
 it: a scan with a fraction of the usual points (a sector, NaN-filled, another sensor's), a corrupt stamp or a
 foreign frame would be aligned somewhere and, worse, could become the reference. So each scan is checked first:
 
-- **stamp**: nanoseconds within a second; not beyond ``future_tolerance`` ahead of the caller's clock; a jump of
-  more than ``stamp_jump`` (or 20 periods) either way is refused unless the next scan confirms the new time base;
+- **stamp**: nanoseconds within a second; not beyond ``future_tolerance`` ahead of the caller's clock; a stamp
+  before the last one (out of order, a bag loop) or more than ``stamp_jump`` (and 20 periods) after it is
+  refused unless the next scan confirms the new time base;
 - **frame**: the trajectory's frame_id is the first scan's; another one is refused until a reset;
 - **point count**: finite points against the running median of the recent scans (``min_count_ratio``), the
   azimuth sectors they cover against the recent coverage (``min_coverage_ratio``: a cropped sector), the share
@@ -56,8 +57,8 @@ class InputChecksConfig:
                                low=1)
     future_tolerance: float = param(10.0, "a stamp more than this (s) ahead of the node's clock is rejected; "
                                     "0 = off", low=0.0)
-    stamp_jump: float = param(30.0, "a stamp more than this (s, and 20 periods) from the last one is rejected "
-                              "unless the next scan confirms it; 0 = off", low=0.0)
+    stamp_jump: float = param(30.0, "a stamp more than this (s, and 20 periods) after the last one, or before it, "
+                              "is rejected unless the next scan confirms it; 0 = off", low=0.0)
 
 
 @dataclass
@@ -136,15 +137,15 @@ class InputChecks:
         if self._last_stamp is None or cfg.stamp_jump <= 0:
             return
         period = float(np.median(self._periods)) if self._periods else 0.0
-        limit = max(cfg.stamp_jump * 1e9, 20.0 * period)
         jump = stamp_ns - self._last_stamp
-        if abs(jump) <= limit:
-            return
+        if 0 <= jump <= max(cfg.stamp_jump * 1e9, 20.0 * period):
+            return  # forward (a duplicate: the aligner skips it)
         pending, self._pending_jump = self._pending_jump, stamp_ns
         if pending is not None and 0 < stamp_ns - pending <= max(3.0 * period, 1e9):
             return  # the new time base is confirmed: the aligner sees a gap (or a restart) and handles it
-        raise ScanRejected(f"stamp jumped {jump * 1e-9:+.3f} s from the last scan: refused unless the next scan "
-                           "follows it", "stamp_jump")
+        kind = "stamp_jump" if jump > 0 else "stamp_back"
+        raise ScanRejected(f"stamp {'jumped' if jump > 0 else 'went back'} {abs(jump) * 1e-9:.3f} s from the last "
+                           "scan: refused unless the next scan follows it", kind)
 
     def _check_levels(self, admitted: Admitted) -> None:
         cfg, n = self.config, admitted.n_finite

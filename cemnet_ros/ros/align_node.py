@@ -114,7 +114,7 @@ class AlignNode(Node):
         try:
             return Incoming.of(msg, topic_kind)
         except ScanRejected as exc:
-            self._reject(exc.kind, f"{topic_kind} cloud rejected: {exc}")
+            self._reject(exc.kind, f"{topic_kind} cloud rejected: {exc}", None)
             return None
 
     def _on_scan(self, msg: PointCloud2) -> None:
@@ -135,7 +135,8 @@ class AlignNode(Node):
     def _queue_pairs(self, ready: list, unpaired: list) -> None:
         tolerance = self._pairs.tolerance_ns * 1e-9
         for source in unpaired:
-            self._reject("unpaired", f"source at {source.stamp_ns * 1e-9:.3f} s has no target within {tolerance:.3f} s")
+            self._reject("unpaired", f"source at {source.stamp_ns * 1e-9:.3f} s has no target within {tolerance:.3f} s",
+                         source.stamp_ns)
         for pair in ready:
             self._submit(pair)
 
@@ -145,9 +146,10 @@ class AlignNode(Node):
             self._warn_throttled("drop", f"queue full{loading}: the oldest scan was dropped "
                                          f"({self._worker.stats().drops} so far; queue_size {self._cfg.queue_size})")
 
-    def _reject(self, kind: str, message: str) -> None:
+    def _reject(self, kind: str, message: str, stamp_ns: Optional[int]) -> None:
         count = self._status.reject(kind)
         self._warn_throttled(kind, f"[{kind}] {message} ({count} rejected so far)")
+        self._outputs.scan_status(stamp_ns, 2, message, rejected=kind)
 
     def _warn_all(self, warnings: list) -> None:
         for kind, message in warnings:
@@ -214,12 +216,15 @@ class AlignNode(Node):
         try:
             step, source, frame = self._sequential(item) if isinstance(item, Incoming) else self._pair(*item)
         except ScanRejected as exc:
-            self._reject(exc.kind, str(exc))
+            self._reject(exc.kind, str(exc), item.stamp_ns if isinstance(item, Incoming) else item[0].stamp_ns)
             return
         self._status.step_done(step)
         self._warn_all(step.warnings)
         if not step.accepted:
             self._warn_throttled("flagged", f"step at {step.stamp_ns * 1e-9:.3f} s flagged: {step.reason}")
+        self._outputs.scan_status(step.stamp_ns, 0 if step.accepted else 1, step.reason or "ok",
+                                  fitness=round(step.fitness, 4), recovered=step.recovered,
+                                  warnings="; ".join(f"[{kind}] {text}" for kind, text in step.warnings))
         dt_s = None if self._last_stamp_ns is None else (step.stamp_ns - self._last_stamp_ns) * 1e-9
         self._last_stamp_ns = step.stamp_ns
         self._outputs.step(step, source, frame, self._base, dt_s)

@@ -24,7 +24,7 @@ except ImportError:  # pragma: no cover - depends on the installation
 
 
 class NodeOutputs:
-    """~/pose, ~/odometry, /tf, ~/aligned_cloud, ~/local_map (latched) and /diagnostics of one node."""
+    """~/pose, ~/odometry, /tf, ~/aligned_cloud, ~/local_map (latched), ~/scan_status and /diagnostics."""
 
     def __init__(self, node: Node, cfg: NodeConfig, covariance_inflation: float) -> None:
         self._node, self._cfg, self._inflation = node, cfg, covariance_inflation
@@ -36,6 +36,7 @@ class NodeOutputs:
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._map = node.create_publisher(PointCloud2, "~/local_map", latched)
         self._diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._scan_status = node.create_publisher(DiagnosticStatus, "~/scan_status", 50)
         self._tf = node.create_publisher(TFMessage, "/tf", 100) if TFMessage is not None and cfg.publish_tf \
             else None
         if cfg.publish_tf and TFMessage is None:
@@ -69,6 +70,14 @@ class NodeOutputs:
 
         points = voxel_downsample(source.points @ T_odom_sensor[:3, :3].T + T_odom_sensor[:3, 3], voxel)
         return make_pointcloud2(PointCloud2, PointField, points, frame, source.msg.header.stamp)
+
+    def scan_status(self, stamp_ns: Optional[int], level: int, message: str, **values: Any) -> None:
+        """The verdict on one input message: OK (a good step), WARN (flagged, published), ERROR (rejected, with
+        its kind in ``values``); name = the message's stamp in ns ("" when it could not be read)."""
+        status = DiagnosticStatus(name="" if stamp_ns is None else str(stamp_ns), hardware_id="cemnet_ros",
+                                  level=bytes([level]), message=message)
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        self._scan_status.publish(status)
 
     def wants_map(self) -> bool:
         return self._map.get_subscription_count() > 0
