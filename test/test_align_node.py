@@ -458,3 +458,35 @@ def test_replay_bag_over_dds(harness_factory, bag):
         assert ate.rmse <= trans_floor, f"ATE {ate.rmse * 100:.2f} cm > {trans_floor * 100:.0f} cm"
     else:
         assert worst_t <= trans_floor and worst_r <= rot_floor, (worst_t, worst_r)
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["-p", "preprocess.voxel_size:=-5.0"], "preprocess.voxel_size"),
+    (["-p", "mode:=bogus"], "mode"),
+    (["-p", "preprocess.max_range:=far"], "preprocess.max_range"),
+    (["-p", "tracking.prior:=network", "-p", "registration.weights:=/nonexistent/w.npz"], "no such file"),
+])
+def test_fatal_configuration_is_one_line_and_exit_2(args, needle):
+    import subprocess
+    import sys
+
+    env = {**os.environ, "ROS_DOMAIN_ID": "231"}
+    run = subprocess.run([sys.executable, "-m", "cemnet_ros.ros.align_node", "--ros-args", *args], env=env,
+                         capture_output=True, text=True, timeout=60)
+    errors = [line for line in run.stderr.splitlines() if "error:" in line]
+    assert run.returncode == 2, run.stderr
+    assert "Traceback" not in run.stderr and len(errors) == 1 and needle in errors[0], run.stderr
+
+
+def test_a_corrupt_weights_file_ends_the_node_with_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    weights = tmp_path / "corrupt.npz"
+    weights.write_bytes(b"not an npz archive")
+    env = {**os.environ, "ROS_DOMAIN_ID": "232"}
+    run = subprocess.run([sys.executable, "-m", "cemnet_ros.ros.align_node", "--ros-args", "-p",
+                          "tracking.prior:=network", "-p", f"registration.weights:={weights}"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert run.stderr.strip().splitlines()[-1].startswith("align_node: error: the engine did not load"), run.stderr
