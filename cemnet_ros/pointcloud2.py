@@ -155,6 +155,35 @@ def decode_point_times(msg: Any, stamp_ns: Optional[int] = None) -> Optional[np.
         raise CloudError("time_field", str(exc)) from exc
 
 
+@dataclass
+class DecodedScan:
+    """What :func:`decode_scan` gives: the finite points, their report, and the point times when asked for."""
+
+    points: np.ndarray
+    report: CloudReport
+    times: Optional[np.ndarray]  # None without a (usable) time field, or when not asked for
+    time_error: str  # why the time field could not be used ("" when it could, or there is none)
+
+
+def decode_scan(msg: Any, want_times: bool = True, stamp_ns: Optional[int] = None) -> DecodedScan:
+    """A scan for the pipeline, as the node and the replay take it: :func:`decode_xyz`, then (``want_times``)
+    :func:`decode_point_times`. Raises CloudError for any fault of the cloud (kind ``invalid`` for a message
+    that breaks the decoder otherwise); an unusable time field is not a fault: the scan goes on undeskewed."""
+    try:
+        points, report = decode_xyz(msg)
+        times, time_error = None, ""
+        if want_times:
+            try:
+                times = decode_point_times(msg, stamp_ns)
+            except CloudError as exc:
+                time_error = str(exc)
+    except CloudError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a malformed message of any other kind is a fault of the cloud
+        raise CloudError("invalid", f"{type(exc).__name__}: {exc}") from None
+    return DecodedScan(points, report, times, time_error)
+
+
 def encode_xyz(points: np.ndarray) -> EncodedCloud:
     """Pack (n, 3) points as float32 x, y, z little endian with a 12-byte point_step."""
     pts = np.asarray(points, dtype=np.float64)

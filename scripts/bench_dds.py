@@ -112,16 +112,21 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def stamped(msgs: list, index: int) -> PointCloud2:
+    """Scan ``index`` of the played sequence, stamped at the KITTI rate (10 Hz) whatever the publishing rate."""
+    msg = msgs[index % len(msgs)]
+    ns = 10 ** 9 + index * 100_000_000
+    msg.header.stamp.sec, msg.header.stamp.nanosec = ns // 10 ** 9, ns % 10 ** 9
+    return msg
+
+
 def stream(probe: Probe, msgs: list, rate: float, seconds: float, first: int, pid: int) -> dict:
     """Publish at ``rate`` for ``seconds`` (stamps at the KITTI rate of 10 Hz); counts and RSS."""
     n, start = int(rate * seconds), time.monotonic()
     odom0, received0, drops0 = len(probe.odometry), probe.counter("received"), probe.counter("queue_drops")
     rss = []
     for i in range(n):
-        msg = msgs[(first + i) % len(msgs)]
-        ns = 10 ** 9 + (first + i) * 100_000_000
-        msg.header.stamp.sec, msg.header.stamp.nanosec = ns // 10 ** 9, ns % 10 ** 9
-        probe.pub.publish(msg)
+        probe.pub.publish(stamped(msgs, first + i))
         if i % max(int(rate / 2), 1) == 0:
             rss.append(rss_mb(pid))
         time.sleep(max(0.0, start + (i + 1) / rate - time.monotonic()))
@@ -136,11 +141,8 @@ def closed_loop(probe: Probe, msgs: list, seconds: float, first: int) -> dict:
     """The next scan once the previous odometry arrived: the node's own capacity."""
     count, start, i = len(probe.odometry), time.monotonic(), 0
     while time.monotonic() - start < seconds:
-        msg = msgs[(first + i) % len(msgs)]
-        ns = 10 ** 9 + (first + i) * 100_000_000
-        msg.header.stamp.sec, msg.header.stamp.nanosec = ns // 10 ** 9, ns % 10 ** 9
         before = len(probe.odometry)
-        probe.pub.publish(msg)
+        probe.pub.publish(stamped(msgs, first + i))
         deadline = time.monotonic() + 10.0
         while len(probe.odometry) == before and time.monotonic() < deadline:
             time.sleep(0.001)

@@ -14,7 +14,7 @@ def _cloud(n, seed=0):
 def _stream(checks, n_scans=5, n_points=1000, frame="lidar", t0=0):
     for k in range(n_scans):
         stamp = t0 + k * PERIOD
-        checks.passed(checks.admit(_cloud(n_points, k), None, stamp, frame), stamp, frame)
+        checks.passed(checks.admit(_cloud(n_points, k), None, stamp, frame))
     return t0 + (n_scans - 1) * PERIOD
 
 
@@ -67,7 +67,7 @@ def test_a_lasting_change_of_the_point_count_relevels_with_a_warning():
     stamp += PERIOD
     admitted = checks.admit(_cloud(300), None, stamp, "lidar")
     assert [kind for kind, _ in admitted.warnings] == ["relevel"]
-    checks.passed(admitted, stamp, "lidar")
+    checks.passed(admitted)
     checks.admit(_cloud(300), None, stamp + PERIOD, "lidar")  # the new level holds
 
 
@@ -110,10 +110,10 @@ def test_a_stamp_jump_is_refused_unless_the_next_scan_confirms_it():
 def test_a_trajectory_that_began_on_a_tiny_scan_restarts_from_the_first_representative_one():
     checks = InputChecks(InputChecksConfig())
     tiny = checks.admit(_cloud(60), None, 0, "lidar")
-    checks.passed(tiny, 0, "lidar")
+    checks.passed(tiny)
     admitted = checks.admit(_cloud(5000), None, PERIOD, "lidar")
     assert admitted.restart and admitted.warnings[0][0] == "implausible_start"
-    checks.passed(admitted, PERIOD, "lidar")
+    checks.passed(admitted)
     with pytest.raises(ScanRejected):  # the level is now the representative scan's
         checks.admit(_cloud(60), None, 2 * PERIOD, "lidar")
 

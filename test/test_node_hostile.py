@@ -27,6 +27,10 @@ def _stamp(ns):
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
+def _ns(msg):
+    return int(msg.header.stamp.sec) * 10 ** 9 + int(msg.header.stamp.nanosec)
+
+
 def _valid(k):
     rng = np.random.default_rng(100 + k)
     pts = (WORLD - POSES[k][:3, 3]) @ POSES[k][:3, :3]
@@ -49,10 +53,8 @@ def _run(h, hostile):
         ns = 1_000_000_000 + k * PERIOD_NS
         status = _send(h, make_pointcloud2(PointCloud2, PointField, _valid(k), "lidar", _stamp(ns)))
         assert status.level == bytes([OK]), (k, status.message)
-        assert wait_for(lambda: any(int(o.header.stamp.sec) * 10 ** 9 + o.header.stamp.nanosec == ns
-                                    for o in h.odometry), 10)
-        valid[k] = pose_of(next(o for o in h.odometry
-                                if int(o.header.stamp.sec) * 10 ** 9 + o.header.stamp.nanosec == ns))
+        assert wait_for(lambda: any(_ns(o) == ns for o in h.odometry), 10)
+        valid[k] = pose_of(next(o for o in h.odometry if _ns(o) == ns))
         if k == 0 or k == N_VALID - 1:
             continue
         for index in range((k - 1) * per_gap, min(k * per_gap, len(hostile))):

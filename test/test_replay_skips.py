@@ -160,3 +160,17 @@ def test_skipped_line_lists_the_first_times_of_each_kind():
     assert skipped_line(skipped, 120) == ("skipped 8 of 120 messages: 7 truncated (t=0.000, 0.100, 0.200, 0.300, "
                                           "0.400, ... s), 1 empty (t=12.300 s)")
     assert skipped_line([], 5) == "skipped 0 of 5 messages"
+
+
+def test_a_nanosec_out_of_range_is_skipped_as_the_node_rejects_it(tmp_path):
+    bag = tmp_path / "bad_nanosec.mcap"
+    msg = _cloud(SCANS[0], STAMP0)
+    msg.header.stamp = TYPESTORE.types["builtin_interfaces/msg/Time"](sec=STAMP0 // 10 ** 9, nanosec=2 ** 32 - 1)
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/points", POINTCLOUD2, typestore=TYPESTORE)
+        writer.write(conn, STAMP0, _raw(msg))
+        writer.write(conn, STAMP0 + PERIOD, _raw(_cloud(SCANS[1], STAMP0 + PERIOD)))
+    with BagReader(bag) as reader:
+        items = list(reader.scans())
+    assert isinstance(items[0], SkippedMessage) and items[0].kind == "stamp" and "nanosec" in items[0].reason
+    assert not isinstance(items[1], SkippedMessage) and items[1].stamp_ns == STAMP0 + PERIOD

@@ -195,7 +195,7 @@ class ScanAligner:
         points, offset_ns = self._deskewed(admitted.points, admitted.times, stamp_ns)
         before = self._last_stamp
         step = self._process_at(points, stamp_ns + offset_ns, start)
-        self._checks.passed(admitted, stamp_ns, frame_id)
+        self._checks.passed(admitted)
         if before is not None and self._last_stamp != before:
             self._last_dt_ns = self._last_stamp - before  # the motion model's last time step
         step.warnings = admitted.warnings

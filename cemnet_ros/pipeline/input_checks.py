@@ -68,6 +68,8 @@ class Admitted:
 
     points: np.ndarray
     times: Optional[np.ndarray]
+    stamp_ns: int
+    frame_id: str
     n_finite: int
     coverage: float  # fraction of the azimuth sectors with points
     nonfinite: float  # share of the message's points that were not finite
@@ -111,13 +113,15 @@ class InputChecks:
         finite = np.all(np.isfinite(points), axis=1)
         n_finite = int(np.count_nonzero(finite))
         n_total = max(len(points) if n_total is None else int(n_total), 1)
-        admitted = Admitted(points, times, n_finite, _coverage(points[finite]), 1.0 - n_finite / n_total)
+        admitted = Admitted(points, times, stamp_ns, frame_id, n_finite, _coverage(points[finite]),
+                            1.0 - n_finite / n_total)
         self._check_levels(admitted)
         self._cap(admitted, finite)
         return admitted
 
-    def passed(self, admitted: Admitted, stamp_ns: int, frame_id: str = "") -> None:
+    def passed(self, admitted: Admitted) -> None:
         """The scan was used: it joins the count level, its stamp and frame become the reference."""
+        stamp_ns = admitted.stamp_ns
         if admitted.restart:
             self._levels.clear()
         self._levels.append((admitted.n_finite, admitted.coverage, admitted.nonfinite))
@@ -125,7 +129,7 @@ class InputChecks:
         if self._last_stamp is not None and stamp_ns > self._last_stamp:
             self._periods.append(stamp_ns - self._last_stamp)
         self._last_stamp, self._pending_jump = stamp_ns, None
-        self._frame_id = frame_id or self._frame_id
+        self._frame_id = admitted.frame_id or self._frame_id
 
     def _check_stamp(self, stamp_ns: int, now_ns: Optional[int]) -> None:
         cfg = self.config

@@ -15,7 +15,8 @@ import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
 
 from cemnet_ros.pipeline.extrinsic import pose_msg_to_matrix
-from cemnet_ros.pointcloud2 import CloudError, CloudReport, decode_point_times, decode_xyz
+from cemnet_ros.pipeline.input_checks import ScanRejected, stamp_ns
+from cemnet_ros.pointcloud2 import CloudError, CloudReport, decode_scan
 from cemnet_ros.replay.bag_types import (
     GROUND_TRUTH_TOPIC,
     ODOMETRY,
@@ -169,18 +170,15 @@ class BagReader:
             msg = self._reader.deserialize(raw, msgtype)
         except Exception as err:  # noqa: BLE001 - rosbags raises assorted errors on malformed CDR
             return SkippedMessage(index, topic, bag_ns, t_s, "invalid", f"cannot deserialize the message: {err!r}")
-        stamp = stamp_to_ns(msg.header.stamp) or bag_ns
-        try:
-            points, report = decode_xyz(msg)
+        try:  # the node's stamp check: a nanosec out of range would shift the stamp
+            stamp = stamp_ns(msg.header.stamp.sec, msg.header.stamp.nanosec) or bag_ns
+        except ScanRejected as err:
+            return SkippedMessage(index, topic, bag_ns, t_s, err.kind, str(err))
+        try:  # an unreadable time field: the scan is used without deskewing, as live
+            decoded = decode_scan(msg, want_times=True, stamp_ns=stamp)
         except CloudError as err:
             return SkippedMessage(index, topic, stamp, t_s, err.kind, str(err))
-        except Exception as err:  # noqa: BLE001 - any other malformed message, as align_node's ``invalid``
-            return SkippedMessage(index, topic, stamp, t_s, "invalid", f"{type(err).__name__}: {err}")
-        try:
-            times = decode_point_times(msg, stamp)
-        except CloudError:  # an unreadable time field: the scan is used without deskewing, as live
-            times = None
-        return CloudFrame(stamp, points, msg.header.frame_id, report, times, index, t_s)
+        return CloudFrame(stamp, decoded.points, msg.header.frame_id, decoded.report, decoded.times, index, t_s)
 
     def clouds(self, limit: Optional[int] = None) -> Iterator[CloudFrame]:
         """Decoded scans in bag order; raises BagError naming the message index when one cannot be decoded."""

@@ -36,7 +36,7 @@ from cemnet_ros.pipeline.pairing import PairMatcher
 from cemnet_ros.pipeline.worker import BoundedWorker
 from cemnet_ros.ros.outputs import NodeOutputs
 from cemnet_ros.ros.parameters import ConfigError, declare_and_read
-from cemnet_ros.ros.scans import Incoming, Scan, decode_scan
+from cemnet_ros.ros.scans import Incoming, Scan, decode
 from cemnet_ros.schema import values as config_values
 
 try:  # a full ROS install only: the sensor's extrinsic from TF
@@ -240,7 +240,7 @@ class AlignNode(Node):
             self._aligner.request_recovery()
 
     def _decode(self, item: Incoming) -> Scan:
-        scan = decode_scan(item, self._pipeline_config.preprocess.deskew)
+        scan = decode(item, self._pipeline_config.preprocess.deskew)
         self._status.decoded()
         self._warn_all(scan.warnings)
         return scan

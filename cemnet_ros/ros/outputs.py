@@ -74,10 +74,7 @@ class NodeOutputs:
     def scan_status(self, stamp_ns: Optional[int], level: int, message: str, **values: Any) -> None:
         """The verdict on one input message: OK (a good step), WARN (flagged, published), ERROR (rejected, with
         its kind in ``values``); name = the message's stamp in ns ("" when it could not be read)."""
-        status = DiagnosticStatus(name="" if stamp_ns is None else str(stamp_ns), hardware_id="cemnet_ros",
-                                  level=bytes([level]), message=message)
-        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
-        self._scan_status.publish(status)
+        self._scan_status.publish(_status("" if stamp_ns is None else str(stamp_ns), level, message, values))
 
     def wants_map(self) -> bool:
         return self._map.get_subscription_count() > 0
@@ -88,9 +85,14 @@ class NodeOutputs:
 
     def diagnostics(self, report: Any) -> None:
         """One DiagnosticStatus from a :class:`~cemnet_ros.pipeline.node_status.Report`."""
-        status = DiagnosticStatus(name=f"{self._node.get_fully_qualified_name()}: alignment",
-                                  hardware_id="cemnet_ros", level=bytes([report.level]), message=report.message)
-        status.values = [KeyValue(key=k, value=str(v)) for k, v in report.values.items()]
+        status = _status(f"{self._node.get_fully_qualified_name()}: alignment", report.level, report.message,
+                         report.values)
         array = DiagnosticArray(status=[status])
         array.header.stamp = self._node.get_clock().now().to_msg()
         self._diagnostics.publish(array)
+
+
+def _status(name: str, level: int, message: str, values: dict) -> DiagnosticStatus:
+    status = DiagnosticStatus(name=name, hardware_id="cemnet_ros", level=bytes([level]), message=message)
+    status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+    return status

@@ -2,7 +2,7 @@
 
 The subscription callback only wraps the message (:class:`Incoming`): decoding 2 MB clouds there would take
 the CPU the worker needs, and under overload most of them would be dropped anyway. The worker decodes the ones
-it gets to (:func:`decode_scan`).
+it gets to (:func:`decode`).
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from typing import Any, Optional
 import numpy as np
 
 from cemnet_ros.pipeline.input_checks import ScanRejected, stamp_ns
-from cemnet_ros.pointcloud2 import CloudError, decode_point_times, decode_xyz
+from cemnet_ros.pointcloud2 import CloudError, decode_scan
 
 
 @dataclass
@@ -41,17 +41,12 @@ class Scan:
     warnings: list  # (kind, message): e.g. a time field that could not be used
 
 
-def decode_scan(item: Incoming, want_times: bool) -> Scan:
-    """The cloud's finite-or-not xyz (and point times when deskewing); ScanRejected with the layout's fault."""
-    msg, warnings = item.msg, []
+def decode(item: Incoming, want_times: bool) -> Scan:
+    """The cloud's finite xyz (and point times when deskewing); ScanRejected with the layout's fault."""
     try:
-        points, report = decode_xyz(msg)
-        times = decode_point_times(msg) if want_times else None
+        decoded = decode_scan(item.msg, want_times)
     except CloudError as exc:
-        if exc.kind != "time_field":
-            raise ScanRejected(f"{item.topic_kind} cloud rejected: {exc}", exc.kind) from None
-        warnings.append(("time_field", f"{item.topic_kind} cloud not deskewed: {exc}"))
-        times = None
-    except Exception as exc:  # noqa: BLE001 - a malformed message must not take the worker down
-        raise ScanRejected(f"{item.topic_kind} cloud rejected: {type(exc).__name__}: {exc}", "invalid") from None
-    return Scan(msg, points, times, item.stamp_ns, report.n_total, warnings)
+        raise ScanRejected(f"{item.topic_kind} cloud rejected: {exc}", exc.kind) from None
+    warnings = [("time_field", f"{item.topic_kind} cloud not deskewed: {decoded.time_error}")] \
+        if decoded.time_error else []
+    return Scan(item.msg, decoded.points, decoded.times, item.stamp_ns, decoded.report.n_total, warnings)
