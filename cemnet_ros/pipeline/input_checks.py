@@ -110,10 +110,10 @@ class InputChecks:
         if frame_id and self._frame_id is not None and frame_id != self._frame_id:
             raise ScanRejected(f"frame_id {frame_id!r} is not the trajectory's {self._frame_id!r}: refused (a reset "
                                "starts over in the new frame)", "frame_id")
-        finite = np.all(np.isfinite(points), axis=1)
-        n_finite = int(np.count_nonzero(finite))
+        finite_points, finite = _finite(points)
+        n_finite = len(finite_points)
         n_total = max(len(points) if n_total is None else int(n_total), 1)
-        admitted = Admitted(points, times, stamp_ns, frame_id, n_finite, _coverage(points[finite]),
+        admitted = Admitted(points, times, stamp_ns, frame_id, n_finite, _coverage(finite_points),
                             1.0 - n_finite / n_total)
         self._check_levels(admitted)
         self._cap(admitted, finite)
@@ -171,16 +171,25 @@ class InputChecks:
         admitted.warnings.append(("relevel", f"{self._low_in_a_row} scans in a row: {fault[1]}: the sensor "
                                   "changed, the levels restart from this scan"))
 
-    def _cap(self, admitted: Admitted, finite: np.ndarray) -> None:
+    def _cap(self, admitted: Admitted, finite: Optional[np.ndarray]) -> None:
         cap = self.config.max_points
         if cap <= 0 or admitted.n_finite <= cap:
             return
-        keep = np.flatnonzero(finite)
+        keep = np.arange(len(admitted.points)) if finite is None else np.flatnonzero(finite)
         keep = np.sort(np.random.default_rng(0).choice(keep, cap, replace=False))
         admitted.warnings.append(("decimated", f"{admitted.n_finite} finite points decimated to {cap} "
                                   "(input.max_points)"))
         admitted.points = admitted.points[keep]
         admitted.times = None if admitted.times is None else admitted.times[keep]
+
+
+def _finite(points: np.ndarray) -> tuple[np.ndarray, Optional[np.ndarray]]:
+    """(the finite rows, their mask or None when all are: the decoded scans are, and a 124k-point mask and copy
+    per scan would cost milliseconds for nothing)."""
+    if np.isfinite(points).all():
+        return points, None
+    finite = np.all(np.isfinite(points), axis=1)
+    return points[finite], finite
 
 
 def _coverage(points: np.ndarray) -> float:
