@@ -7,6 +7,10 @@
   :data:`FASTMATH_INF_SAFE` drops the no-inf/no-nan assumptions. A kernel that sets no fastmath is compiled
   with that of the first kernel that calls it (numba's flag inheritance, one version per signature: the normals'
   eigen solver gets ``_voxel_normals``' fast-math), so :func:`kernel` passes on only the options it is given.
+- **dynamic chunks**: every ``prange`` loop hands out its iterations in chunks (``numba.parallel_chunksize``,
+  sized per loop) instead of numba's default of one static block per thread. On a shared machine (the ROS
+  executor, the DDS threads, the driver) a pre-empted thread would otherwise hold up the whole kernel while
+  the others idle: this is what let a node fed 10x its rate fall well below its own capacity.
 - **threading layer**: OpenMP first, which is thread-safe when several threads launch parallel kernels at once
   (a node's worker and a caller), and skips the too-old TBB that some machines carry (numba warns about it on
   every start otherwise). Set here, before any parallel kernel first runs.
