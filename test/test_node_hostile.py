@@ -15,7 +15,7 @@ from test_align_node import WORLD, Harness, context, pose_error, pose_of, wait_f
 from cemnet_ros.data.hostile import corpus
 from cemnet_ros.pointcloud2 import make_pointcloud2
 
-pytestmark = pytest.mark.dds
+pytestmark = [pytest.mark.dds, pytest.mark.slow]
 
 PERIOD_NS = 100_000_000
 N_VALID = 32

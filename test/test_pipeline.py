@@ -320,3 +320,32 @@ def test_pair_alignment_recovers_the_relative_pose_from_no_guess():
     again = aligner.align_pair(scan_of(WORLD, source_pose, rng), target, PERIOD)
     assert again.accepted and not again.recovered
     assert pose_error(source_pose, again.pose) < (0.02, 0.1)
+
+
+def test_pair_mode_checks_both_clouds_and_a_refused_one_changes_nothing():
+    rng = np.random.default_rng(4)
+    source_pose = make_transform(yaw=0.3, t=(1.0, 0.5, 0.0))
+    aligner = ScanAligner(FAST)
+    target = scan_of(WORLD, np.eye(4), rng)
+    t0 = 100 * PERIOD
+    first = aligner.align_pair(scan_of(WORLD, source_pose, rng), target, t0, source_frame="lidar",
+                               target_frame="map")
+    assert first.accepted, first.reason
+    refusals = [
+        (dict(source=scan_of(WORLD, source_pose, rng)[:60], target=target), "point_count"),
+        (dict(source=scan_of(WORLD, source_pose, rng), target=target, source_frame="robot2/lidar"), "frame_id"),
+        (dict(source=scan_of(WORLD, source_pose, rng), target=target, stamp_ns=t0 - PERIOD), "stamp_back"),
+        (dict(source=scan_of(WORLD, source_pose, rng), target=scan_of(WORLD, np.eye(4), rng),
+              target_frame="other_map"), "target_frame_id"),
+        (dict(source=scan_of(WORLD, source_pose, rng), target=scan_of(WORLD, np.eye(4), rng)[:50]),
+         "target_point_count"),
+    ]
+    for k, (kwargs, kind) in enumerate(refusals):
+        kwargs = {"stamp_ns": t0 + (k + 1) * PERIOD, "source_frame": "lidar", "target_frame": "map", **kwargs}
+        with pytest.raises(ScanRejected) as info:
+            aligner.align_pair(kwargs.pop("source"), kwargs.pop("target"), kwargs.pop("stamp_ns"), **kwargs)
+        assert info.value.kind == kind
+    after = aligner.align_pair(scan_of(WORLD, source_pose, rng), target, t0 + 10 * PERIOD, source_frame="lidar",
+                               target_frame="map")
+    assert after.accepted and not after.recovered, after.reason
+    assert pose_error(source_pose, after.pose) < (0.02, 0.1)

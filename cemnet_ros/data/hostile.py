@@ -2,13 +2,15 @@
 
 Each case is built from a valid scan of the stream it is slipped into, so that it looks as real as possible:
 malformed layouts, degenerate geometry, stamp faults, data-level faults (a sector, another robot's frame, a
-few points of the previous scan) and oversized clouds. The node must reject each one with a counted reason,
-or publish it flagged, or (``handled``) process it with a warning; and the valid scans around them must come
-out as they would without them. Used by test/test_node_hostile.py and scripts/soak_node.py.
+few points of the previous scan), oversized clouds and byte streams that are no serialized PointCloud2 (a
+publisher may send raw CDR bytes; ``build`` then returns ``bytes``). The node must reject each one with a
+counted reason, or publish it flagged, or (``handled``) process it with a warning; and the valid scans around
+them must come out as they would without them. Used by test/test_node_hostile.py and scripts/soak_node.py.
 """
 from __future__ import annotations
 
 import copy
+import struct
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -18,17 +20,18 @@ from cemnet_ros.pointcloud2 import make_pointcloud2
 
 FLOAT32, FLOAT64 = 7, 8
 INTEGER_TYPES = (1, 2, 3, 4, 5, 6)
+FRAME = "lidar"  # the frame of the valid stream the cases are slipped into (the frame_ cases differ from it)
 
 
 @dataclass
 class Case:
     name: str
-    category: str  # layout, geometry, stamp, data, size
+    category: str  # layout, geometry, stamp, data, size, cdr
     expect: str  # "rejected", "rejected_or_flagged" or "handled" (processed with a warning)
-    build: Callable[[Any, Any, np.ndarray, Any], Any]  # (PointCloud2, PointField, points, stamp) -> message
+    build: Callable[[Any, Any, np.ndarray, Any], Any]  # (PointCloud2, PointField, points, stamp) -> message/bytes
 
 
-def _msg(cls: Any, field_cls: Any, points: np.ndarray, stamp: Any, frame: str = "lidar") -> Any:
+def _msg(cls: Any, field_cls: Any, points: np.ndarray, stamp: Any, frame: str = FRAME) -> Any:
     return make_pointcloud2(cls, field_cls, np.asarray(points, dtype=np.float64), frame, stamp)
 
 
@@ -42,7 +45,7 @@ def _edit(edit: Callable[[Any], None]) -> Callable:
     return build
 
 
-def _points(make: Callable[[np.ndarray], np.ndarray], frame: str = "lidar") -> Callable:
+def _points(make: Callable[[np.ndarray], np.ndarray], frame: str = FRAME) -> Callable:
     """A message of ``make(scan points)`` (geometry and data faults)."""
     return lambda cls, field_cls, points, stamp: _msg(cls, field_cls, make(points), stamp, frame)
 
@@ -198,7 +201,38 @@ def size_cases() -> list[Case]:
     return [Case("two_million_points", "size", "handled", _points(_huge))]
 
 
+CDR_LE = b"\x00\x01\x00\x00"  # the encapsulation of little-endian plain CDR
+
+
+def _cdr_header(stamp: Any, frame: str = FRAME) -> bytes:
+    """The CDR bytes of a std_msgs/Header (after the encapsulation), padded to 4 bytes."""
+    name = frame.encode() + b"\0"
+    out = struct.pack("<iII", stamp.sec, stamp.nanosec, len(name)) + name
+    return out + b"\0" * (-len(out) % 4)
+
+
+def _cdr_cloud(stamp: Any, data_length: int, data: bytes) -> bytes:
+    """A PointCloud2 stream of one point (x float32) whose data sequence claims ``data_length`` bytes."""
+    field = struct.pack("<I", 2) + b"x\0" + b"\0\0" + struct.pack("<IBxxxI", 0, FLOAT32, 1)
+    body = struct.pack("<II", 1, 1) + struct.pack("<I", 1) + field + struct.pack("<?xxxII", False, 4, 4)
+    return CDR_LE + _cdr_header(stamp) + body + struct.pack("<I", data_length) + data + b"\x01"
+
+
+def cdr_cases() -> list[Case]:
+    """Byte streams a raw publisher could send: the subscription takes them raw, the node must refuse them."""
+    return [
+        Case("cdr_encapsulation_only", "cdr", "rejected", lambda c, f, p, stamp: CDR_LE),
+        Case("cdr_unknown_encapsulation", "cdr", "rejected",
+             lambda c, f, p, stamp: b"\x7f\x7f\x00\x00" + _cdr_header(stamp) + bytes(64)),
+        Case("cdr_ends_after_header", "cdr", "rejected", lambda c, f, p, stamp: CDR_LE + _cdr_header(stamp)),
+        Case("cdr_data_beyond_buffer", "cdr", "rejected",
+             lambda c, f, p, stamp: _cdr_cloud(stamp, 1_000_000_000, bytes(16))),
+        Case("cdr_random_after_header", "cdr", "rejected",
+             lambda c, f, p, stamp: CDR_LE + _cdr_header(stamp) + np.random.default_rng(11).bytes(256)),
+    ]
+
+
 def corpus(last_ns: int) -> list[Case]:
     """Every case; stamp faults are relative to ``last_ns``, the last valid scan's stamp (each case's own stamp,
     passed to ``build``, is the stamp to use otherwise)."""
-    return layout_cases() + geometry_cases() + stamp_cases(last_ns) + data_cases() + size_cases()
+    return layout_cases() + geometry_cases() + stamp_cases(last_ns) + data_cases() + size_cases() + cdr_cases()

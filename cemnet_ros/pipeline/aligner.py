@@ -127,6 +127,8 @@ class ScanAligner:
         self._fixed_scale = self.config.preprocess.scale if self.config.preprocess.scale > 0 else None
         self._pair_targets: dict[int, tuple[np.ndarray, VoxelMap]] = {}
         self._checks = InputChecks(self.config.checks)
+        # Pair mode's targets (a latched map keeps its old stamp): their own levels and frame, no stamp order.
+        self._target_checks = InputChecks(dataclasses.replace(self.config.checks, stamp_jump=0.0))
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
         refine.compile_kernels()
         self.reset()
@@ -172,6 +174,7 @@ class ScanAligner:
         self._inserted: Optional[list] = None  # the map's scans while none could be deskewed (None: not tracked)
         self._last_dt_ns = 0  # the motion model's last time step
         self._checks.forget_frame()
+        self._target_checks.forget_frame()
 
     def request_recovery(self) -> None:
         """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
@@ -288,11 +291,20 @@ class ScanAligner:
                              estimate.degenerate, estimate.signals.as_dict())
 
     # -- pair mode ------------------------------------------------------------------------------------------
-    def align_pair(self, source: np.ndarray, target: np.ndarray, stamp_ns: int) -> AlignmentStep:
-        """Pair mode: the pose of ``source`` in the frame of ``target`` (a reused target is prepared once)."""
+    def align_pair(self, source: np.ndarray, target: np.ndarray, stamp_ns: int, *, source_frame: str = "",
+                   target_frame: str = "", target_stamp_ns: Optional[int] = None, now_ns: Optional[int] = None,
+                   n_total: Optional[int] = None) -> AlignmentStep:
+        """Pair mode: the pose of ``source`` in the frame of ``target`` (a reused target is prepared once).
+
+        Both clouds pass the input checks first, each against the levels of its own stream (a target's kinds
+        are prefixed ``target_``; its stamp is checked against the clock only); ScanRejected changes nothing.
+        """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
-        target_map = self._pair_target(target)
-        frame = self._preprocess(source)
+        admitted = self._checks.admit(source, None, stamp_ns, source_frame, now_ns, n_total)
+        target_map, target_warnings = self._pair_target(target, target_frame,
+                                                        stamp_ns if target_stamp_ns is None else target_stamp_ns,
+                                                        now_ns)
+        frame = self._preprocess(admitted.points)
         if self._last_stamp is not None and stamp_ns < self._last_stamp:
             self._motion.reset()
         why = "no pose yet" if self._motion.last_pose is None else ""
@@ -312,23 +324,32 @@ class ScanAligner:
         relative = None if previous is None else np.linalg.inv(previous) @ pose
         reason = "; ".join(estimate.failures + estimate.notes)
         covariance = estimate.published_covariance(self.config.health.covariance_inflation)
-        return AlignmentStep(stamp_ns, pose.copy(), relative, covariance, estimate.signals.fitness,
+        self._checks.passed(admitted)
+        step = AlignmentStep(stamp_ns, pose.copy(), relative, covariance, estimate.signals.fitness,
                              accepted, time.perf_counter() - start, len(frame.sampled), reason, estimate.recovered,
-                             why, estimate.degenerate,
-                             estimate.signals.as_dict())
+                             why, estimate.degenerate, estimate.signals.as_dict())
+        step.warnings = admitted.warnings + target_warnings
+        return step
 
-    def _pair_target(self, target: np.ndarray) -> VoxelMap:
-        """The target's map, built once per target array (a latched map is prepared once)."""
+    def _pair_target(self, target: np.ndarray, frame_id: str, stamp_ns: int, now_ns: Optional[int]
+                     ) -> tuple[VoxelMap, list]:
+        """The target's map (and its input checks' warnings), built once per target array (a latched map is
+        prepared once)."""
         cached = self._pair_targets.get(id(target))
         if cached is not None and cached[0] is target:
-            return cached[1]
-        frame = self._preprocess(target)
+            return cached[1], []
+        try:
+            admitted = self._target_checks.admit(target, None, stamp_ns, frame_id, now_ns)
+        except ScanRejected as exc:
+            raise ScanRejected(f"target cloud: {exc}", f"target_{exc.kind}") from None
+        self._target_checks.passed(admitted)
+        frame = self._preprocess(admitted.points)
         self._adopt(frame)
         target_map = self._new_map()
         target_map.update(frame.dense, np.zeros(3))
         self._pair_targets.clear()
         self._pair_targets[id(target)] = (target, target_map)
-        return target_map
+        return target_map, admitted.warnings
 
     # -- the steps ------------------------------------------------------------------------------------------
     def _deskewed(self, points: np.ndarray, point_times: Optional[np.ndarray], stamp_ns: int

@@ -1,9 +1,9 @@
 """``align_node``: CEMNet point cloud alignment as a ROS 2 odometry node.
 
-The subscription callbacks only wrap and queue the messages (:mod:`.scans`); one worker thread loads the engine
-(so that the subscriptions exist at once and early scans wait in the queue), then decodes, checks
+The subscriptions take the messages' CDR bytes and only queue them (:mod:`.scans`); one worker thread loads the engine
+(so that the subscriptions exist at once and early scans wait in the queue), then deserializes and decodes, checks
 (:mod:`~cemnet_ros.pipeline.input_checks`), registers with :class:`~cemnet_ros.pipeline.aligner.ScanAligner`
-and publishes (:mod:`.outputs`). A full queue drops its oldest message before it is decoded, counted and reported.
+and publishes (:mod:`.outputs`). A full queue drops its oldest message before it is deserialized, counted and reported.
 
 Modes: ``sequential`` registers each ``input_topic`` scan against a local map (odometry of ``base_frame`` in
 ``odom_frame``); ``pair`` aligns each ``source_topic`` scan to the ``target_topic`` cloud nearest in stamp (or
@@ -25,6 +25,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
@@ -97,7 +98,7 @@ class AlignNode(Node):
                                durability=DurabilityPolicy.VOLATILE)
         if cfg.mode == "sequential":
             self._input_topic = cfg.input_topic
-            self.create_subscription(PointCloud2, cfg.input_topic, self._on_scan, input_qos)
+            self.create_subscription(PointCloud2, cfg.input_topic, self._on_scan, input_qos, raw=True)
             return
         target_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=cfg.qos_depth,
                                 reliability=ReliabilityPolicy.RELIABLE,
@@ -105,30 +106,30 @@ class AlignNode(Node):
             else input_qos
         self._pairs: PairMatcher = PairMatcher(int(cfg.pair_tolerance * 1e9), cfg.qos_depth, cfg.qos_depth)
         self._input_topic = cfg.source_topic
-        self.create_subscription(PointCloud2, cfg.source_topic, self._on_source, input_qos)
-        self.create_subscription(PointCloud2, cfg.target_topic, self._on_target, target_qos)
+        self.create_subscription(PointCloud2, cfg.source_topic, self._on_source, input_qos, raw=True)
+        self.create_subscription(PointCloud2, cfg.target_topic, self._on_target, target_qos, raw=True)
 
-    # -- inputs (executor thread: wrap + enqueue only, no decoding) -----------------------------------------
-    def _incoming(self, msg: PointCloud2, topic_kind: str) -> Optional[Incoming]:
+    # -- inputs (executor thread: CDR bytes + stamp, enqueue; no deserializing) ------------------------------
+    def _incoming(self, payload: bytes, topic_kind: str) -> Optional[Incoming]:
         self._status.input_arrived()
         try:
-            return Incoming.of(msg, topic_kind)
+            return Incoming.of(payload, topic_kind)
         except ScanRejected as exc:
             self._reject(exc.kind, f"{topic_kind} cloud rejected: {exc}", None)
             return None
 
-    def _on_scan(self, msg: PointCloud2) -> None:
-        item = self._incoming(msg, "input")
+    def _on_scan(self, payload: bytes) -> None:
+        item = self._incoming(payload, "input")
         if item is not None:
             self._submit(item)
 
-    def _on_target(self, msg: PointCloud2) -> None:
-        item = self._incoming(msg, "target")
+    def _on_target(self, payload: bytes) -> None:
+        item = self._incoming(payload, "target")
         if item is not None:
             self._queue_pairs(*self._pairs.add_target(item))
 
-    def _on_source(self, msg: PointCloud2) -> None:
-        item = self._incoming(msg, "source")
+    def _on_source(self, payload: bytes) -> None:
+        item = self._incoming(payload, "source")
         if item is not None:
             self._queue_pairs(*self._pairs.add_source(item))
 
@@ -240,14 +241,15 @@ class AlignNode(Node):
             self._aligner.request_recovery()
 
     def _decode(self, item: Incoming) -> Scan:
-        scan = decode(item, self._pipeline_config.preprocess.deskew)
+        scan = decode(item, self._pipeline_config.preprocess.deskew,
+                      lambda payload: deserialize_message(payload, PointCloud2))
         self._status.decoded()
         self._warn_all(scan.warnings)
         return scan
 
     def _sequential(self, item: Incoming) -> tuple[Any, Scan, str]:
         scan = self._decode(item)
-        frame_id = item.msg.header.frame_id
+        frame_id = scan.msg.header.frame_id
         self._sensor_extrinsic(frame_id)
         with self._map_lock:
             step = self._aligner.process(scan.points, scan.stamp_ns, scan.times, frame_id=frame_id,
@@ -258,7 +260,10 @@ class AlignNode(Node):
         if self._target is None or self._target[0] is not target_item:  # a latched target is decoded once
             self._target = (target_item, self._decode(target_item))
         target, source = self._target[1], self._decode(source_item)
-        step = self._aligner.align_pair(source.points, target.points, source.stamp_ns)
+        step = self._aligner.align_pair(source.points, target.points, source.stamp_ns,
+                                        source_frame=source.msg.header.frame_id,
+                                        target_frame=target.msg.header.frame_id, target_stamp_ns=target.stamp_ns,
+                                        now_ns=self.get_clock().now().nanoseconds, n_total=source.n_total)
         return step, source, target.msg.header.frame_id or self._cfg.odom_frame
 
     def _load(self) -> None:
