@@ -1,13 +1,17 @@
 """ament_python package definition; also a plain pip-installable package with console scripts."""
+import re
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 package_name = "cemnet_ros"
+# The one version string is cemnet_ros.__version__ (package.xml repeats it: ament needs a literal; a test checks).
+version = re.search(r'__version__ = "([^"]+)"', (Path(__file__).parent / package_name / "__init__.py").read_text())[1]
 
 setup(
     name=package_name,
-    version="0.1.0",
+    version=version,
     packages=find_packages(exclude=["test", "test.*"]),
     package_data={package_name: ["weights/*.npz", "weights/*.md"]},
     data_files=[

@@ -1,10 +1,18 @@
-"""Where the optional real data lives (../shared); tests that need it skip cleanly when it is absent."""
+"""Where the optional real data lives (../shared, found by :func:`cemnet_ros.data.shared.shared_dir`); tests that
+need it use :func:`requires_shared` and skip cleanly when it is absent."""
 from pathlib import Path
 
 import pytest
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+from cemnet_ros.data.shared import REPO
+
+SHARED = REPO.parent / "shared"
 OFFICIAL_DIR = SHARED / "reference" / "cemnet_official"
 MODELNET = SHARED / "data" / "modelnet40_subset.npz"
+KITTI = SHARED / "data" / "kitti_sample"
 
-needs_shared = pytest.mark.skipif(not SHARED.exists(), reason="../shared (real data) is absent")
+
+def requires_shared(path: Path = SHARED):
+    """The one marker of a test on real data: ``shared_data``, and a skip when ``path`` is absent."""
+    skip = pytest.mark.skipif(not path.exists(), reason=f"needs {path.relative_to(SHARED.parent)} (real data)")
+    return lambda test: pytest.mark.shared_data(skip(test))

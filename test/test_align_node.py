@@ -197,6 +197,7 @@ def test_bad_parameter_values_are_refused(context):
         AlignNode(context=context, parameter_overrides=[Parameter("registration.n_points", value=3)])
 
 
+@pytest.mark.slow
 def test_sequential_odometry_follows_the_ground_truth(harness_factory):
     h = harness_factory({"qos_reliability": "best_effort"})  # the default sensor-data QoS
     outputs = [h.send(scan_msg(k), timeout=FIRST_TIMEOUT if k < 2 else 60.0) for k in range(len(POSES))]
@@ -250,6 +251,7 @@ def _bad_clouds():
             "no_finite": nan_only, "point_count": too_few}  # 10 points where 12000 are usual
 
 
+@pytest.mark.slow
 def test_bad_inputs_are_counted_warned_and_do_not_stop_valid_scans(harness_factory):
     h = harness_factory()
     h.send(scan_msg(0), timeout=FIRST_TIMEOUT)

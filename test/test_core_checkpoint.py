@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 import torch
-from shared_data import OFFICIAL_DIR, needs_shared
+from shared_data import OFFICIAL_DIR, requires_shared
 
 from cemnet_ros.core.checkpoint import DEFAULT_WEIGHTS, CheckpointError, load_network, load_weights, save_weights
 from cemnet_ros.core.network import SamplingNetwork
@@ -56,7 +56,7 @@ def test_bundled_default_weights_load():
     assert isinstance(load_network(None), SamplingNetwork)
 
 
-@needs_shared
+@requires_shared(OFFICIAL_DIR)
 @pytest.mark.parametrize("name", sorted(p.name for p in OFFICIAL_DIR.glob("*.pth")) or ["none"])
 def test_all_official_checkpoints_load_strictly(name):
     path = OFFICIAL_DIR / name

@@ -1,17 +1,15 @@
 """The ModelNet40 pair protocol: ranges, geometry, crop, noise, seeding, and shape archives."""
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
+from shared_data import MODELNET, requires_shared
 
 from cemnet_ros.data.shapes import bracket_shape
 from cemnet_ros.eval.protocol import ProtocolConfig, load_shapes, make_pair, protocol_pairs
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-MODELNET = SHARED / "data" / "modelnet40_subset.npz"
 SHAPE = bracket_shape(2048, seed=3)
 EXACT = ProtocolConfig(partial=False, noise=False)
 
@@ -186,8 +184,7 @@ def test_load_shapes_errors(tmp_path):
     assert load_shapes(tmp_path / "nosplit.npz", "all")[0].shape == (2, 4, 3)
 
 
-@pytest.mark.shared_data
-@pytest.mark.skipif(not MODELNET.exists(), reason="needs ../shared")
+@requires_shared(MODELNET)
 def test_real_modelnet_subset():
     test, labels = load_shapes(MODELNET, "test")
     assert test.shape == (63, 2048, 3)

@@ -1,14 +1,13 @@
 """Point cloud file reading/writing: every format, and bad input giving clear errors."""
 import struct
-from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import KITTI, requires_shared
 
 from cemnet_ros.io.atomic import atomic_write_text
 from cemnet_ros.io.pointcloud_files import PointCloudFileError, lzf_decompress, read_points, write_ply
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 RNG = np.random.default_rng(7)
 POINTS = RNG.normal(size=(50, 3))
 
@@ -218,9 +217,8 @@ def test_atomic_write_needs_existing_folder(tmp_path):
         atomic_write_text(tmp_path / "missing" / "a.txt", "x")
 
 
-@pytest.mark.shared_data
-@pytest.mark.skipif(not (SHARED / "data" / "kitti_sample").exists(), reason="needs ../shared")
+@requires_shared(KITTI)
 def test_real_kitti_scan():
-    points = read_points(SHARED / "data" / "kitti_sample" / "velodyne" / "000000.bin")
+    points = read_points(KITTI / "velodyne" / "000000.bin")
     assert points.shape[1] == 3 and len(points) > 100_000
     assert 20 < np.linalg.norm(points, axis=1).max() < 200  # metres

@@ -1,8 +1,7 @@
 """cemnet-replay end to end: outputs, accuracy against ground truth, errors; the bundled bags' accuracy floors.
 
 The ``test_bundled_*`` tests replay the committed bags with DEFAULT settings and check the project's accuracy
-floors. They are the slow part of this file (~10-60 s each on 2 free cores); set CEMNET_FAST_TESTS=1 to
-skip them during development. They need no ../shared: the bags are committed in bags/.
+floors (about a second each). They need no ../shared: the bags are committed in bags/.
 """
 from __future__ import annotations
 
@@ -24,8 +23,6 @@ from cemnet_ros.tools.replay_cli import load_params, main
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
-SLOW = pytest.mark.skipif(os.environ.get("CEMNET_FAST_TESTS") == "1",
-                          reason="slow bundled-bag replay skipped by CEMNET_FAST_TESTS=1")
 
 
 def _make_bags_module():
@@ -431,7 +428,6 @@ def _replay_default(bag: Path, tmp_path: Path) -> dict:
     return _summary(tmp_path)
 
 
-@SLOW
 @pytest.mark.parametrize("bag, scans, max_trans, max_rot", [
     ("kitti_00_6scans.mcap", 6, 0.05, 0.2),  # real KITTI (its ground truth is good to ~2 cm)
     ("synthetic_lidar.mcap", 20, 0.02, 0.1),  # exact ground truth
@@ -444,7 +440,6 @@ def test_bundled_lidar_default_settings_floor(tmp_path, bag, scans, max_trans, m
     assert worst[0] <= max_trans and worst[1] <= max_rot, acc["per_pair"]
 
 
-@SLOW
 def test_bundled_rgbd_default_settings_floor(tmp_path):
     """Slow (~60-120 s). Real 7-Scenes RGB-D, 50 frames: ATE RMSE within 2 cm."""
     acc = _replay_default(BAGS / "rgbd_7scenes_50.mcap", tmp_path)["accuracy"]

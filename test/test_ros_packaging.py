@@ -330,3 +330,9 @@ def test_rviz_config_parses_and_shows_the_node_outputs():
     assert topics["PointCloud2"] == {"/points", "/align_node/aligned_cloud", "/align_node/local_map"}
     (odometry,) = [display for display in manager["Displays"] if display["Class"].endswith("/Odometry")]
     assert odometry["Covariance"]["Value"] is True
+
+
+def test_package_xml_repeats_the_one_version_string():
+    import cemnet_ros
+
+    assert ET.parse(REPO / "package.xml").getroot().findtext("version") == cemnet_ros.__version__

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from shared_data import MODELNET, requires_shared
 
 from cemnet_ros.core.checkpoint import load_network
 from cemnet_ros.core.config import UNSEEDED, CEMConfig
@@ -22,8 +23,7 @@ from cemnet_ros.train.config import TrainConfig, epoch_learning_rate
 from cemnet_ros.train.data import PairDataset, build_datasets, drop_duplicates, load_scan_shapes, split_train_val
 from cemnet_ros.train.trainer import Trainer
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-SUBSET = SHARED / "data" / "modelnet40_subset.npz"
+SUBSET = MODELNET
 TINY = ProtocolConfig(n_points=160, n_partial=96)
 
 
@@ -116,7 +116,7 @@ def test_scan_folder_is_normalised_and_bad_files_are_skipped(tmp_path):
         load_scan_shapes(tmp_path / "empty", 200, seed=1, progress=False)
 
 
-@pytest.mark.skipif(not SUBSET.exists(), reason="needs ../shared/data/modelnet40_subset.npz")
+@requires_shared(SUBSET)
 def test_real_subset_holds_out_train_shapes_only():
     config = TrainConfig(data=str(SUBSET), progress=False)
     with pytest.warns(UserWarning, match="3 exact duplicate"):  # the subset repeats 3 bench shapes as 'airplane'
@@ -260,6 +260,7 @@ def _ddp_worker(rank: int, world: int, port: int, data: str, root: str) -> None:
         ddp.shutdown(info)
 
 
+@pytest.mark.slow
 def test_ddp_two_cpu_ranks_stay_in_sync(shapes_npz, tmp_path):
     import torch.multiprocessing as mp
 
