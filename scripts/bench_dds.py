@@ -37,7 +37,7 @@ os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(PROFILE))  # before 
 import rclpy  # noqa: E402
 
 from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
-from cemnet_ros.ros.probe import Probe, kitti_clouds, rss_mb, serialized, stamped, start_node  # noqa: E402
+from cemnet_ros.ros.probe import Probe, kitti_clouds, node_log, rss_mb, serialized, stamped, start_node  # noqa: E402
 
 NS = "/bench"
 
@@ -87,7 +87,7 @@ def session(reliable: bool, phases: list, msgs: list) -> dict:
             stream(probe, msgs, 2.0, 1.0, first, node.pid)
             first += 2
         if len(probe.odometry) < 3:
-            raise RuntimeError("the node produced no odometry: " + (node.stderr.read() if node.poll() else ""))
+            raise RuntimeError("the node produced no odometry: " + node_log(node)[-2000:])
         time.sleep(2.0)  # the scans queued while the engine loaded are processed before the phases count
         first += 100
         for name, phase in phases:

@@ -44,7 +44,7 @@ from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 
 from cemnet_ros.data.hostile import FRAME, corpus  # noqa: E402
 from cemnet_ros.io.atomic import atomic_write_bytes, atomic_write_text, jsonable  # noqa: E402
-from cemnet_ros.ros.probe import Probe, kitti_clouds, rss_mb, serialized, stamped, start_node  # noqa: E402
+from cemnet_ros.ros.probe import Probe, kitti_clouds, node_log, rss_mb, serialized, stamped, start_node  # noqa: E402
 
 NS = "/soak"
 RATE_HZ = 10.0
@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> dict:
             soak.publish_scan()
             time.sleep(0.5)
         if not probe.odometry:
-            raise RuntimeError("the node produced no odometry: " + (node.stderr.read() if node.poll() else ""))
+            raise RuntimeError("the node produced no odometry: " + node_log(node)[-2000:])
         time.sleep(2.0)
         base = _totals(probe, soak)
         soak.published.clear()

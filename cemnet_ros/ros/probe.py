@@ -10,6 +10,7 @@ from __future__ import annotations
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -67,13 +68,26 @@ def stamped(msg: Any, stamp_ns: Optional[int] = None) -> Any:
     return msg
 
 
-def start_node(namespace: str, params: dict, log_level: str = "warn") -> subprocess.Popen:
-    """``align_node`` as a process in ``namespace`` with ``params``; stderr piped (the logs)."""
+def start_node(namespace: str, params: dict, log_level: str = "warn", env: Optional[dict] = None
+               ) -> subprocess.Popen:
+    """``align_node`` as a process in ``namespace`` with ``params`` (and ``env``); its log goes to a temporary
+    file (:func:`node_log`), never to a pipe that a long run would fill and block the node on."""
     args = [sys.executable, "-m", "cemnet_ros.ros.align_node", "--ros-args", "-r", f"__ns:={namespace}",
             "--log-level", log_level]
     for name, value in params.items():
         args += ["-p", f"{name}:={value}"]
-    return subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    log = tempfile.TemporaryFile(mode="w+")
+    process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=log, text=True, env=env)
+    process.log = log  # type: ignore[attr-defined]
+    return process
+
+
+def node_log(process: subprocess.Popen) -> str:
+    """What a node started by :func:`start_node` has logged so far."""
+    log = process.log  # type: ignore[attr-defined]
+    log.flush()
+    log.seek(0)
+    return log.read()
 
 
 def rss_mb(pid: int) -> float:
