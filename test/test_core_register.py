@@ -67,3 +67,17 @@ def test_invalid_registration_config():
         RegistrationConfig(prior="magic")
     with pytest.raises(ValueError):
         RegistrationConfig(n_points=8)
+
+
+def test_register_keeps_the_engines_of_the_most_recent_configs_only(bracket):
+    from cemnet_ros.core import registration
+
+    registration._DEFAULT_REGISTRARS.clear()
+    configs = [RegistrationConfig(n_points=64 + k, cem=CEMConfig(n_candidates=20, n_iters=1, n_fused_iters=0, seed=0))
+               for k in range(registration.REGISTRARS_KEPT + 2)]
+    for config in configs:
+        register(bracket, bracket, config)
+    register(bracket, bracket, configs[2])  # used again: becomes the most recent
+    kept = list(registration._DEFAULT_REGISTRARS)
+    assert len(kept) == registration.REGISTRARS_KEPT
+    assert kept[-1] == repr(configs[2]) and repr(configs[0]) not in kept and repr(configs[1]) not in kept

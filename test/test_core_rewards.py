@@ -6,20 +6,26 @@ from cemnet_ros.core.geometry import euler_to_matrix_np
 from cemnet_ros.core.lattice import locality_order
 from cemnet_ros.core.lattice_rewards import LATTICE_SPACING, LatticePair
 from cemnet_ros.core.losses import geman_mcclure_loss
-from cemnet_ros.core.rewards import chamfer_distance, max_consensus_distance, max_consensus_reward
+from cemnet_ros.core.rewards import max_consensus_reward, nearest_sq_distances
+
+
+def _mc_distance(source, target, eps):
+    """The paper's D^mc = 2 - reward: the CEM's cost, 0 for a perfect overlap."""
+    return 2.0 - max_consensus_reward(source, target, eps)
 
 
 def test_lemma_mc_equals_chamfer_over_epsilon_when_epsilon_covers_all_distances(bracket):
     src = torch.tensor(bracket[:300])
     tgt = torch.tensor(bracket[300:600]) + 0.01
     eps = 10.0  # larger than every nearest-neighbour distance
-    torch.testing.assert_close(max_consensus_distance(src, tgt, eps), chamfer_distance(src, tgt) / eps)
+    chamfer = (nearest_sq_distances(src, tgt)[0].sqrt().mean(-1) + nearest_sq_distances(tgt, src)[0].sqrt().mean(-1))
+    torch.testing.assert_close(_mc_distance(src, tgt, eps), chamfer / eps)
 
 
 def test_mc_is_zero_for_identical_and_two_for_far_clouds(bracket):
     pts = torch.tensor(bracket)
-    assert max_consensus_distance(pts, pts, 0.1).item() == pytest.approx(0.0, abs=1e-6)
-    assert max_consensus_distance(pts, pts + 100.0, 0.1).item() == pytest.approx(2.0)
+    assert _mc_distance(pts, pts, 0.1).item() == pytest.approx(0.0, abs=1e-6)
+    assert _mc_distance(pts, pts + 100.0, 0.1).item() == pytest.approx(2.0)
 
 
 def test_mc_by_hand():

@@ -1,6 +1,7 @@
 """High-level registration API: ``register(source, target)`` on numpy clouds of any size."""
 from __future__ import annotations
 
+import collections
 import time
 import warnings
 from dataclasses import dataclass
@@ -138,7 +139,8 @@ class Registrar:
                                   time.perf_counter() - start)
 
 
-_DEFAULT_REGISTRARS: dict[str, Registrar] = {}
+REGISTRARS_KEPT = 4  # distinct configs whose engine register() keeps (each holds a network): least recent out
+_DEFAULT_REGISTRARS: collections.OrderedDict[str, Registrar] = collections.OrderedDict()
 
 
 def register(source: np.ndarray, target: np.ndarray, config: RegistrationConfig | None = None, *,
@@ -146,10 +148,12 @@ def register(source: np.ndarray, target: np.ndarray, config: RegistrationConfig 
              ) -> RegistrationResult:
     """Register ``source`` onto ``target`` (any sizes; sub-sampled to ``config.n_points``).
 
-    The engine for a given config is built once and reused by later calls.
+    The engine for a given config is built once and reused by later calls (the REGISTRARS_KEPT most recent).
     """
     config = config or RegistrationConfig()
     key = repr(config)
-    if key not in _DEFAULT_REGISTRARS:
-        _DEFAULT_REGISTRARS[key] = Registrar(config)
-    return _DEFAULT_REGISTRARS[key].register(source, target, prior_pose, prior_sigma)
+    registrar = _DEFAULT_REGISTRARS.pop(key, None) or Registrar(config)
+    _DEFAULT_REGISTRARS[key] = registrar
+    while len(_DEFAULT_REGISTRARS) > REGISTRARS_KEPT:
+        _DEFAULT_REGISTRARS.popitem(last=False)
+    return registrar.register(source, target, prior_pose, prior_sigma)

@@ -36,15 +36,3 @@ def max_consensus_reward(source: torch.Tensor, target: torch.Tensor, epsilon: fl
     return score(d_src) + score(d_tgt)
 
 
-def max_consensus_distance(source: torch.Tensor, target: torch.Tensor, epsilon: float) -> torch.Tensor:
-    """The paper's D^mc = 2 - reward: the CEM's cost, 0 for a perfect overlap."""
-    return 2.0 - max_consensus_reward(source, target, epsilon)
-
-
-def chamfer_distance(source: torch.Tensor, target: torch.Tensor, squared: bool = False) -> torch.Tensor:
-    """Two-way mean nearest-neighbour distance (squared distances when ``squared``)."""
-    d_src = nearest_sq_distances(source, target)[0]
-    d_tgt = nearest_sq_distances(target, source)[0]
-    if not squared:
-        d_src, d_tgt = d_src.sqrt(), d_tgt.sqrt()
-    return d_src.mean(-1) + d_tgt.mean(-1)
