@@ -166,12 +166,14 @@ def run(args: argparse.Namespace) -> dict:
 
 def _progress(elapsed: float, minutes: float, probe: Probe, soak: Soak) -> None:
     print(f"[soak] {elapsed / 60:.1f}/{minutes:.1f} min: {len(soak.published)} scans published, "
-          f"{len(soak.faults)} faults, RSS {soak.rss[-1][1]:.0f} MB, drops {probe.counter('queue_drops')}",
+          f"{len(soak.faults)} faults, RSS {soak.rss[-1][1]:.0f} MB; node: drops {probe.counter('queue_drops')}, "
+          f"errors {probe.counter('errors')}, global searches {probe.counter('recoveries')}, flagged "
+          f"{probe.counter('flagged_steps')}, last: {probe.diagnostics.get('last_reason', '') or 'ok'}",
           file=sys.stderr, flush=True)
 
 
 def _totals(probe: Probe, soak: Soak) -> dict:
-    return {"received": probe.counter("received"), "queue_drops": probe.counter("queue_drops")}
+    return {key: probe.counter(key) for key in ("received", "queue_drops", "errors", "recoveries")}
 
 
 def _summary(soak: Soak, probe: Probe, verdicts: list, base: dict, start: float, args: argparse.Namespace) -> dict:
@@ -196,6 +198,8 @@ def _summary(soak: Soak, probe: Probe, verdicts: list, base: dict, start: float,
         "verdicts": len(verdicts), "accepted": levels.count(0), "flagged": levels.count(1),
         "rejected": levels.count(2), "rejected_kinds": rejected, "queue_drops": drops,
         "unaccounted": published - len(verdicts) - drops,
+        "node_errors": probe.counter("errors") - base["errors"],
+        "recoveries": probe.counter("recoveries") - base["recoveries"],
         "bad_clouds_accepted": sorted(soak.bad[s] for s, v in by_stamp.items() if s in soak.bad and v.level == 0),
         "faults": {f: sum(1 for _, g, _ in soak.faults if g == f) for f in sorted(set(FAULTS))},
         "rss_mb": {"first": float(rss[0]), "last": float(rss[-1]), "min": float(rss.min()), "max": float(rss.max()),
@@ -228,7 +232,8 @@ def _report(summary: dict) -> str:
              f"messages: {summary['published']} published, {summary['received']} received by the node; verdicts "
              f"{summary['verdicts']} ({summary['accepted']} accepted, {summary['flagged']} flagged, "
              f"{summary['rejected']} rejected: {summary['rejected_kinds']}), {summary['queue_drops']} counted queue "
-             f"drops, {summary['unaccounted']} unaccounted; bad clouds accepted as good steps: "
+             f"drops, {summary['unaccounted']} unaccounted; {summary['node_errors']} processing errors, "
+             f"{summary['recoveries']} global searches; bad clouds accepted as good steps: "
              f"{len(summary['bad_clouds_accepted'])} {summary['bad_clouds_accepted']}",
              f"RSS: {rss['first']:.0f} -> {rss['last']:.0f} MB (min {rss['min']:.0f}, max {rss['max']:.0f}); "
              f"slope after warm-up {rss['slope_mb_per_min_after_warm_up']:+.2f} MB/min, over the second half "

@@ -268,6 +268,30 @@ def test_bad_inputs_are_counted_warned_and_do_not_stop_valid_scans(harness_facto
     assert wait_for(lambda: any(d.level == d.WARN for d in h.diagnostics), 5)
 
 
+def test_a_scan_whose_processing_raises_gets_an_error_verdict_and_one_traceback(harness_factory):
+    h = harness_factory()
+    h.send(scan_msg(0), timeout=FIRST_TIMEOUT)
+    real = h.node._aligner.process
+    calls = []
+
+    def fail_once(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("injected fault")
+        return real(*args, **kwargs)
+
+    h.node._aligner.process = fail_once
+    count = len(h.statuses)
+    h.pubs["points"].publish(scan_msg(1, pose=POSES[1]))
+    assert wait_for(lambda: len(h.statuses) > count, 10)
+    verdict = h.statuses[count]
+    assert verdict.level == bytes([2]) and "injected fault" in verdict.message
+    assert {kv.key: kv.value for kv in verdict.values}.get("error") == "RuntimeError"
+    assert wait_for(lambda: any("Traceback" in log.msg and log.level == Log.ERROR for log in h.logs), 5)
+    odom = h.send(scan_msg(2, pose=POSES[2]))  # the next scan goes on
+    assert pose_error(POSES[2], pose_of(odom))[0] < 0.02
+
+
 def test_reset_restarts_the_map_and_keeps_odom_continuous(harness_factory):
     h = harness_factory()
     for k in range(3):

@@ -349,3 +349,21 @@ def test_pair_mode_checks_both_clouds_and_a_refused_one_changes_nothing():
                                target_frame="map")
     assert after.accepted and not after.recovered, after.reason
     assert pose_error(source_pose, after.pose) < (0.02, 0.1)
+
+
+def test_a_prediction_off_the_map_is_searched_where_the_map_grew_never_an_exception():
+    """2 m a scan towards the world's edge, then 5 s without scans while the sensor moved 1 m: the constant
+    velocity predicts 10 m further, beyond the map (a short CEM radius: 4 m). That raised in the lattice (an
+    empty map sample); the global search now starts where the map last grew."""
+    config = dataclasses.replace(FAST, preprocess=dataclasses.replace(FAST.preprocess, cem_radius=0.2),
+                                 recovery=dataclasses.replace(FAST.recovery, radius=1.0))
+    rng = np.random.default_rng(5)
+    aligner = ScanAligner(config)
+    first = make_transform(t=(10.0, 0.0, 0.0))
+    for k in range(4):
+        step = aligner.process(scan_of(WORLD, make_transform(t=(10.0 + 2.0 * k, 0.0, 0.0)), rng), k * PERIOD)
+        assert step.accepted, (k, step.reason)
+    truth = make_transform(t=(17.0, 0.0, 0.0))
+    step = aligner.process(scan_of(WORLD, truth, rng), 3 * PERIOD + 5 * 10 ** 9)
+    assert step.recovered and step.accepted, step.reason
+    assert pose_error(np.linalg.inv(first) @ truth, step.pose) < (0.05, 0.2)

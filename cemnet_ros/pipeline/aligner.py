@@ -173,6 +173,7 @@ class ScanAligner:
         self._skewed_input: Optional[tuple[np.ndarray, np.ndarray]] = None  # this scan, timed but not deskewed
         self._inserted: Optional[list] = None  # the map's scans while none could be deskewed (None: not tracked)
         self._last_dt_ns = 0  # the motion model's last time step
+        self._T_odom_last_insert: Optional[np.ndarray] = None  # where the map last grew (a recovery's fallback)
         self._checks.forget_frame()
         self._target_checks.forget_frame()
 
@@ -240,6 +241,7 @@ class ScanAligner:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
         self._map = self._new_map()
         self._map.update(apply_transform(T_odom_sensor, frame.dense), T_odom_sensor[:3, 3])
+        self._T_odom_last_insert = T_odom_sensor.copy()
         self._inserted = []
         self._note_inserted(T_odom_sensor)
         self._health.reset()
@@ -278,6 +280,7 @@ class ScanAligner:
                 self._spread.update(np.linalg.inv(T_predicted) @ pose)
             self._health.accept(estimate.signals.fitness)
             self._map.update(apply_transform(pose, frame.dense), pose[:3, 3])
+            self._T_odom_last_insert = pose.copy()
             self._note_inserted(pose)
         self._pose = pose
         self._motion.update(pose, stamp_ns)
@@ -502,6 +505,8 @@ class ScanAligner:
         """
         cfg = self.config
         target = self._map_sample(target_map, T_predicted, cfg.registration.n_points)
+        if len(target) < cfg.preprocess.min_points:
+            return self._off_map(T_predicted, "prediction")
         to_units, from_units = self._units(target.mean(axis=0))
         clouds = apply_transform(to_units, frame.sampled), apply_transform(to_units, target)
         rotation, translation = self._spread.spread(dt_ratio)
@@ -540,6 +545,12 @@ class ScanAligner:
         """
         cfg, rec = self.config, self.config.recovery
         target = self._map_sample(target_map, T_guess, rec.points, margin=rec.radius)
+        if len(target) < cfg.preprocess.min_points and target_map is self._map \
+                and self._T_odom_last_insert is not None:
+            T_guess = self._T_odom_last_insert  # the guess left the map (a wild prediction): search where it grew
+            target = self._map_sample(target_map, T_guess, rec.points, margin=rec.radius)
+        if len(target) < cfg.preprocess.min_points:
+            return self._off_map(T_guess, "guess")
         to_units, from_units = self._units(T_guess[:3, 3])
         # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
         uniform = voxel_downsample(frame.near, target_map.voxel_size)
@@ -624,6 +635,13 @@ class ScanAligner:
                                              cfg.min_conditioning)
         return Estimate(T_final, covariance, signals, failures, notes, recovered,
                         conditioning.degenerate_basis(cfg.min_conditioning), conditioning.length)
+
+    def _off_map(self, T_guess: np.ndarray, what: str) -> Estimate:
+        """A failure: the map has too few points within reach of the ``what`` to register against (the step
+        publishes the prediction, flagged; failures in a row restart the map)."""
+        radius = self.config.preprocess.cem_radius * self._scale
+        return Estimate(T_guess.copy(), flat_covariance(radius, np.pi), Signals(0.0, 0.0, 0.0, 0.0, 0.0),
+                        [f"no map points within {radius:.1f} m of the {what}"], [], False, np.zeros((6, 0)), 1.0)
 
     def _held(self, stamp_ns: int, start: float, frame: Frame, reason: str) -> AlignmentStep:
         return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 0.0, False,

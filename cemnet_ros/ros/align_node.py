@@ -15,6 +15,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+import traceback
 from pathlib import Path
 from typing import Any, Optional
 
@@ -69,6 +70,7 @@ class AlignNode(Node):
         self._engine_ready = threading.Event()  # set when loaded, or when loading failed / the node closes
         self._map_lock = threading.Lock()  # the worker changes the map; services and timers read it
         self._last_warn: dict = {}
+        self._errors_logged: set[str] = set()
         self._last_stamp_ns: Optional[int] = None
         self._requests: dict[str, Any] = {}
         self._lock = threading.Lock()
@@ -327,9 +329,16 @@ class AlignNode(Node):
             self.get_logger().warn(message)
 
     def _on_worker_error(self, item: Any, exc: BaseException) -> None:
+        """A scan whose processing raised: counted, warned, and an ERROR verdict (no scan goes unreported)."""
         if not self.context.ok():
             return  # shutting down: the publishers are gone, nothing failed
-        self._warn_throttled("error", f"registration failed: {type(exc).__name__}: {exc}")
+        message = f"registration failed: {type(exc).__name__}: {exc}"
+        if type(exc).__name__ not in self._errors_logged:  # the first of a kind with its traceback: a bug to report
+            self._errors_logged.add(type(exc).__name__)
+            self.get_logger().error(message + "\n" + "".join(traceback.format_exception(exc)))
+        self._warn_throttled("error", message)
+        self._outputs.scan_status(item.stamp_ns if isinstance(item, Incoming) else item[0].stamp_ns, 2, message,
+                                  error=type(exc).__name__)
 
     def _publish_diagnostics(self) -> None:
         scale = None if self._aligner is None else self._aligner.scale
