@@ -157,5 +157,7 @@ class Probe:
         return future.done() and future.result().success
 
     def close(self) -> None:
+        """Stop spinning and wait for the thread: a process that exits while it spins aborts in C++."""
         self.executor.shutdown()
+        self.thread.join(10.0)
         self.node.destroy_node()
