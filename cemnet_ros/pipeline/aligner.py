@@ -506,7 +506,7 @@ class ScanAligner:
         cfg = self.config
         target = self._map_sample(target_map, T_predicted, cfg.registration.n_points)
         if len(target) < cfg.preprocess.min_points:
-            return self._off_map(T_predicted, "prediction")
+            return self._off_map(T_predicted, "prediction", 0.0)
         to_units, from_units = self._units(target.mean(axis=0))
         clouds = apply_transform(to_units, frame.sampled), apply_transform(to_units, target)
         rotation, translation = self._spread.spread(dt_ratio)
@@ -550,7 +550,7 @@ class ScanAligner:
             T_guess = self._T_odom_last_insert  # the guess left the map (a wild prediction): search where it grew
             target = self._map_sample(target_map, T_guess, rec.points, margin=rec.radius)
         if len(target) < cfg.preprocess.min_points:
-            return self._off_map(T_guess, "guess")
+            return self._off_map(T_guess, "guess", rec.radius)
         to_units, from_units = self._units(T_guess[:3, 3])
         # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
         uniform = voxel_downsample(frame.near, target_map.voxel_size)
@@ -636,10 +636,10 @@ class ScanAligner:
         return Estimate(T_final, covariance, signals, failures, notes, recovered,
                         conditioning.degenerate_basis(cfg.min_conditioning), conditioning.length)
 
-    def _off_map(self, T_guess: np.ndarray, what: str) -> Estimate:
-        """A failure: the map has too few points within reach of the ``what`` to register against (the step
-        publishes the prediction, flagged; failures in a row restart the map)."""
-        radius = self.config.preprocess.cem_radius * self._scale
+    def _off_map(self, T_guess: np.ndarray, what: str, margin: float) -> Estimate:
+        """A failure: the map has too few points within the CEM's radius (+ ``margin`` m) of the ``what`` to
+        register against (the step publishes the prediction, flagged; failures in a row restart the map)."""
+        radius = self.config.preprocess.cem_radius * self._scale + margin
         return Estimate(T_guess.copy(), flat_covariance(radius, np.pi), Signals(0.0, 0.0, 0.0, 0.0, 0.0),
                         [f"no map points within {radius:.1f} m of the {what}"], [], False, np.zeros((6, 0)), 1.0)
 
