@@ -22,22 +22,24 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import sys
 import time
 from pathlib import Path
 
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 200)))
+import rclpy
 
-from cemnet_ros.ros.probe import PROFILE, REPO  # noqa: E402
-
-os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(PROFILE))  # before rclpy starts
-
-import rclpy  # noqa: E402
-
-from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
-from cemnet_ros.ros.probe import Probe, kitti_clouds, node_log, rss_mb, serialized, stamped, start_node  # noqa: E402
+from cemnet_ros.io.atomic import atomic_write_text, jsonable
+from cemnet_ros.ros.probe import (
+    REPO,
+    Probe,
+    dds_environment,
+    kitti_clouds,
+    node_log,
+    rss_mb,
+    serialized,
+    stamped,
+    start_node,
+)
 
 NS = "/bench"
 
@@ -112,6 +114,7 @@ def main() -> None:
     args = parser.parse_args()
     clouds = kitti_clouds()
     msgs = serialized(clouds) if args.publisher == "serialized" else clouds
+    os.environ.update(dds_environment())  # before rclpy starts and the node process inherits it
     rclpy.init()
     try:
         standing = msgs[:1]

@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pytest
 
-from cemnet_ros.ros.probe import PROFILE, node_log, start_node
+from cemnet_ros.ros.probe import PROFILE, dds_environment, node_log, start_node
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow]
 
@@ -25,8 +25,8 @@ NS = "/full"
 
 
 def test_full_size_scans_at_10_hz_all_arrive_and_are_processed():
-    env = {**os.environ, "FASTRTPS_DEFAULT_PROFILES_FILE": str(PROFILE), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-           "ROS_DOMAIN_ID": str(random.randint(120, 200))}
+    env = {**os.environ, **dds_environment(), "FASTRTPS_DEFAULT_PROFILES_FILE": str(PROFILE),
+           "ROS_DOMAIN_ID": str(random.randint(120, 200))}  # the shipped profile and a domain of its own
     node = start_node(NS, {"qos_reliability": "best_effort"}, env=env)
     try:
         run = subprocess.run([sys.executable, __file__], env=env, capture_output=True, text=True, timeout=300)

@@ -21,8 +21,7 @@ from tqdm import tqdm
 from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.odometry_output import OdometryOutput, odometry_output
-from cemnet_ros.replay.bag_reader import BagReader, CloudFrame, SkippedMessage
-from cemnet_ros.replay.bag_types import (
+from cemnet_ros.replay.bag_io import (
     ODOMETRY,
     POINTCLOUD2,
     POSE_STAMPED,
@@ -30,8 +29,11 @@ from cemnet_ros.replay.bag_types import (
     TF_STATIC_TOPIC,
     TF_TOPIC,
     BagError,
+    BagReader,
+    BagWriter,
+    CloudFrame,
+    SkippedMessage,
 )
-from cemnet_ros.replay.bag_writer import BagWriter
 from cemnet_ros.ros.node_config import NodeConfig
 
 NODE_NAME = "align_node"  # the node's default name: replay.mcap carries its topics, as a live run would

@@ -219,7 +219,7 @@ class AlignNode(Node):
         try:
             step, source, frame = self._sequential(item) if isinstance(item, Incoming) else self._pair(*item)
         except ScanRejected as exc:
-            self._reject(exc.kind, str(exc), item.stamp_ns if isinstance(item, Incoming) else item[0].stamp_ns)
+            self._reject(exc.kind, str(exc), _stamp_of(item))
             return
         self._status.step_done(step)
         self._warn_all(step.warnings)
@@ -337,8 +337,7 @@ class AlignNode(Node):
             self._errors_logged.add(type(exc).__name__)
             self.get_logger().error(message + "\n" + "".join(traceback.format_exception(exc)))
         self._warn_throttled("error", message)
-        self._outputs.scan_status(item.stamp_ns if isinstance(item, Incoming) else item[0].stamp_ns, 2, message,
-                                  error=type(exc).__name__)
+        self._outputs.scan_status(_stamp_of(item), 2, message, error=type(exc).__name__)
 
     def _publish_diagnostics(self) -> None:
         scale = None if self._aligner is None else self._aligner.scale
@@ -349,6 +348,11 @@ class AlignNode(Node):
         self._engine_ready.set()  # a worker waiting for the engine gives up
         self._worker.close()
         super().destroy_node()
+
+
+def _stamp_of(item: Any) -> int:
+    """The stamp of a queued item: a scan (sequential mode) or a (source, target) pair (its source's)."""
+    return item.stamp_ns if isinstance(item, Incoming) else item[0].stamp_ns
 
 
 def main(args: Optional[list] = None) -> None:

@@ -7,6 +7,8 @@ driver's publish: on a 2-core machine the harness would otherwise take the cores
 """
 from __future__ import annotations
 
+import os
+import random
 import struct
 import subprocess
 import sys
@@ -32,6 +34,14 @@ from cemnet_ros.ros.scans import HEADER_STAMP_OFFSET
 REPO = Path(__file__).resolve().parents[2]
 PROFILE = REPO / "config" / "fastdds_large_data.xml"
 KITTI = REPO.parent / "shared" / "data" / "kitti_sample" / "velodyne"
+
+
+def dds_environment() -> dict[str, str]:
+    """The environment of a benchmark's processes: this host only, a domain of its own and the shipped profile
+    (a domain or profile already set wins). Apply it before ``rclpy.init`` and before starting the node."""
+    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "ROS_DOMAIN_ID": os.environ.get("ROS_DOMAIN_ID") or str(random.randint(1, 200)),
+            "FASTRTPS_DEFAULT_PROFILES_FILE": os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or str(PROFILE)}
 
 
 def kitti_clouds(directory: Path = KITTI, frame_id: str = "velodyne") -> list[PointCloud2]:
