@@ -11,9 +11,9 @@ from scipy.spatial.transform import Rotation
 from street_scene import make_transform, make_world
 
 from cemnet_ros.core import CEMConfig, RegistrationConfig
-from cemnet_ros.pipeline.aligner import ScanAligner, ScanRejected
+from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
-from cemnet_ros.pipeline.input_checks import InputChecksConfig
+from cemnet_ros.pipeline.input_checks import InputChecksConfig, ScanRejected
 from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
 from cemnet_ros.pipeline.preprocess import (
     crop_range,

@@ -15,13 +15,13 @@ relative to it; so wherever a driver puts its stamp, the times say it. KISS-ICP 
 per stamp interval, which need not be the sweep's) and presumes the stamp's place in the sweep.
 
 :func:`deskew` moves the points to the instant their times are relative to (the stamp, or any reference: shift
-the times). The pipeline (:meth:`ScanAligner._deskewed <cemnet_ros.pipeline.aligner.ScanAligner>`) deskews to
+the times). The pipeline (:class:`~cemnet_ros.pipeline.sweep.SweepDeskewer`) deskews to
 the sweep's middle, where a registration pins the pose whatever the velocity used, and publishes the pose at
 the stamp.
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -56,32 +56,37 @@ def normalize_point_times(raw: np.ndarray, stamp_ns: int, name: str = "time",
     """
     values = np.asarray(raw).reshape(-1)
     stamp_ns = int(stamp_ns)
-    stamp_s = stamp_ns * 1e-9
-    if values.dtype.kind in "iu":
-        candidates = [("nanoseconds relative to the stamp", lambda v: v.astype(np.float64) * 1e-9, 0.0)]
-    elif values.dtype.kind == "f":
-        candidates = [  # (reading, conversion, least max |value| it needs: small floats are never nanoseconds)
-            ("seconds relative to the stamp", lambda v: v.astype(np.float64), 0.0),
-            ("absolute seconds", lambda v: v.astype(np.float64) - stamp_s, 0.0),
-            ("absolute nanoseconds", lambda v: (v.astype(np.float64) - float(stamp_ns)) * 1e-9, 0.0),
-            ("nanoseconds relative to the stamp", lambda v: v.astype(np.float64) * 1e-9, MIN_NANOSECONDS),
-        ]
-    else:
-        raise TimeFieldError(f"time field {name!r} has dtype {values.dtype}, not an integer or float")
+    readings = _readings(values.dtype, stamp_ns, name)
     finite = np.isfinite(values) if values.dtype.kind == "f" else np.ones(len(values), dtype=bool)
     if not np.any(finite):
         return np.zeros(len(values), dtype=np.float64)
     largest = float(np.max(np.abs(values[finite].astype(np.float64))))
-    for _, convert, least in candidates:
+    for _, convert, least in readings:
         times = np.zeros(len(values), dtype=np.float64)
         times[finite] = convert(values[finite])
         if largest >= least and np.max(np.abs(times[finite])) <= max_offset:
             return times
     lo, hi = (float(np.min(values[finite])), float(np.max(values[finite])))
-    readings = ", ".join(label for label, _, _ in candidates)
+    tried = ", ".join(label for label, _, _ in readings)
     raise TimeFieldError(f"time field {name!r} ({values.dtype}, values {lo:.6g}..{hi:.6g}, stamp "
                          f"{stamp_ns * 1e-9:.9f} s) fits no convention within {max_offset} s of the stamp "
-                         f"(tried: {readings})")
+                         f"(tried: {tried})")
+
+
+def _readings(dtype: np.dtype, stamp_ns: int, name: str) -> list[tuple[str, Callable, float]]:
+    """The plausible readings of a time field of ``dtype``, in order: (label, conversion to seconds relative
+    to the stamp, least max |value| it needs: small floats are never nanoseconds)."""
+    stamp_s = stamp_ns * 1e-9
+    if dtype.kind in "iu":
+        return [("nanoseconds relative to the stamp", lambda v: v.astype(np.float64) * 1e-9, 0.0)]
+    if dtype.kind == "f":
+        return [
+            ("seconds relative to the stamp", lambda v: v.astype(np.float64), 0.0),
+            ("absolute seconds", lambda v: v.astype(np.float64) - stamp_s, 0.0),
+            ("absolute nanoseconds", lambda v: (v.astype(np.float64) - float(stamp_ns)) * 1e-9, 0.0),
+            ("nanoseconds relative to the stamp", lambda v: v.astype(np.float64) * 1e-9, MIN_NANOSECONDS),
+        ]
+    raise TimeFieldError(f"time field {name!r} has dtype {dtype}, not an integer or float")
 
 
 def se3_log(transform: np.ndarray) -> np.ndarray:
@@ -116,7 +121,7 @@ def _hat3(w: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
-def deskew(points: np.ndarray, times: np.ndarray, T_prev_curr: np.ndarray, dt: float,
+def deskew(points: np.ndarray, times: np.ndarray, T_prev_curr: Optional[np.ndarray], dt: float,
            twist: Optional[np.ndarray] = None) -> np.ndarray:
     """Points measured at their own times ``times`` (s, relative to the stamp) -> the sensor frame at the stamp.
 
@@ -131,8 +136,8 @@ def deskew(points: np.ndarray, times: np.ndarray, T_prev_curr: np.ndarray, dt: f
     if pts.ndim != 2 or pts.shape[1] != 3 or len(t) != len(pts):
         raise ValueError(f"points must be (n, 3) and times (n,), not {pts.shape} and {t.shape}")
     if twist is None:
-        if not dt > 0:
-            raise ValueError(f"dt must be > 0, not {dt}")
+        if T_prev_curr is None or not dt > 0:
+            raise ValueError(f"without a twist, T_prev_curr and dt > 0 are needed (dt = {dt})")
         twist = se3_log(T_prev_curr) / dt
     xi = np.asarray(twist, dtype=np.float64)
     if not np.any(xi) or not np.any(t):

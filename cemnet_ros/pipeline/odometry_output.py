@@ -68,7 +68,7 @@ def odometry_output(step: Any, base: BaseFrame, dt_s: Optional[float], cfg: Any,
     relative = None if step.relative is None else base.relative(step.relative)
     pose_cov, twist_cov = covariances(step, base, T_odom_base, dt_s, cfg, covariance_inflation)
     known = relative is not None and bool(dt_s)
-    if known:
+    if relative is not None and dt_s:
         linear = relative[:3, 3] / dt_s
         angular = Rotation.from_matrix(relative[:3, :3]).as_rotvec() / dt_s
     else:

@@ -104,7 +104,8 @@ def _voxel_centroids(points, voxel_size):
 
     Keys count cells from the lowest occupied one (a mixed-radix number), so no coordinate range is too large.
     The table starts small (scans have several points per voxel) and doubles when half full; consecutive
-    points of a scan mostly share a voxel, so the previous point's voxel is tried first.
+    points of a scan mostly share a voxel, so the previous point's voxel is tried first. One long kernel: numba
+    compiles no closures, and split into calls the hot loop would pass the table back and forth.
     """
     n = points.shape[0]
     lo, hi = np.empty(3, dtype=np.int64), np.empty(3, dtype=np.int64)

@@ -12,6 +12,8 @@ The storage and its kernels are :mod:`.voxel_hash` (hash table, insertion, pruni
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numba
 import numpy as np
 
@@ -22,6 +24,13 @@ from cemnet_ros.pipeline.voxel_query import nearest_batch, slots_within
 
 class VoxelMap:
     """Points (with normals and planarity) in voxels of ``voxel_size``, at most ``max_points_per_voxel`` each."""
+
+    _pts: np.ndarray  # (capacity * max_points_per_voxel, 3) slots, voxel by voxel
+    _normals: np.ndarray
+    _planarity: np.ndarray
+    _counts: np.ndarray  # (capacity,) points in each voxel
+    _voxel_keys: np.ndarray
+    _table: np.ndarray  # (size, 2) hash table rows (key, voxel)
 
     def __init__(self, voxel_size: float, max_points_per_voxel: int = 10, max_distance: float = 100.0) -> None:
         if voxel_size <= 0.0 or max_points_per_voxel < 1 or max_distance <= 0.0:
@@ -35,10 +44,9 @@ class VoxelMap:
         """Forget every point."""
         self._n_voxels = 0
         self._n_points = 0
-        self._counts = None
         self._allocate_voxels(1024)
         self._allocate_table(4096)
-        self._dense = None
+        self._dense: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = None
 
     def __len__(self) -> int:
         return self._n_points
@@ -79,7 +87,9 @@ class VoxelMap:
                                                    self._voxel_keys, self._n_voxels, self._table, self._shift, inserted)
         voxels, n_new = np.unique(inserted[:n_inserted] // m, return_counts=True)
         rings = int(np.ceil(NORMAL_RADIUS))
-        around = np.empty((numba.config.NUMBA_NUM_THREADS, (2 * rings + 1) ** 3), dtype=np.int64)
+        # numba.config sets its attributes at import: no stub knows them
+        threads = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
+        around = np.empty((threads, (2 * rings + 1) ** 3), dtype=np.int64)
         estimate_normals(voxels, n_new, self.voxel_size, m, self._pts, self._counts, self._normals, self._planarity,
                          self._voxel_keys, self._table, self._shift, around)
         sensor = np.ascontiguousarray(sensor_position, dtype=np.float64).reshape(3)
@@ -121,12 +131,11 @@ class VoxelMap:
     def _allocate_voxels(self, capacity: int) -> None:
         """Voxel storage for ``capacity`` voxels, keeping the current ones."""
         m = self.max_points_per_voxel
-        old = self._counts
         pts, normals = np.zeros((capacity * m, 3)), np.zeros((capacity * m, 3))
         planarity, counts = np.zeros(capacity * m), np.zeros(capacity, dtype=np.int64)
         keys = np.full(capacity, EMPTY, dtype=np.int64)
-        if old is not None:
-            used = self._n_voxels
+        used = self._n_voxels
+        if used:
             pts[:used * m], normals[:used * m] = self._pts[:used * m], self._normals[:used * m]
             planarity[:used * m], counts[:used], keys[:used] = (self._planarity[:used * m], self._counts[:used],
                                                                  self._voxel_keys[:used])

@@ -1,0 +1,120 @@
+"""Scans made into frames in the trajectory's units (step 1 of the recipe in :mod:`.aligner`).
+
+Units: the network and the CEM's epsilon live on the ModelNet unit sphere. A trajectory's ``scale`` (metres per
+network unit) is fixed by configuration or, in auto mode, by the robust radius of the scan that starts it; the
+frame voxel follows from it. A scan is adopted as the measure only once it is used: a rejected or implausible
+scan must not fix the units of the trajectory.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.input_checks import ScanRejected
+from cemnet_ros.pipeline.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
+from cemnet_ros.pipeline.voxel_map import VoxelMap
+
+LOST_RESCALE_RATIO = 2.0  # a lost trajectory measures the auto scale again on a scan this much larger or smaller
+
+
+@dataclass
+class Frame:
+    """A preprocessed scan (sensor frame, metres): voxel cloud (map), polish subset and CEM subset.
+
+    The CEM sees points near the sensor only: its look-up lattices span the clouds' box, and far points make
+    that box (and its cache misses) large for little information.
+    """
+
+    dense: np.ndarray
+    polish: np.ndarray
+    sampled: np.ndarray
+    near: np.ndarray  # the voxel points within the CEM's radius (the global search draws from them)
+    scale: float  # metres per network unit this frame was prepared with
+    voxel: float  # its voxel size (m); 0 = no voxel grid
+
+    @property
+    def length(self) -> float:
+        """RMS range of the polish points: the lever arm that makes rotations comparable to translations."""
+        return float(np.sqrt(np.mean(np.sum(self.polish ** 2, axis=1)))) or 1.0
+
+    @property
+    def polish_voxel(self) -> float:
+        """The unit of the polish's pairing distances (m): the voxel, or scale / 100 without a voxel grid."""
+        return self.voxel if self.voxel > 0 else self.scale / 100.0
+
+    def network_units(self, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(to_units, from_units): 4x4 maps between metres and network units centred on ``centre`` (3,)."""
+        to_units = np.eye(4)
+        to_units[:3, :3] /= self.scale
+        to_units[:3, 3] = -np.asarray(centre) / self.scale
+        return to_units, np.linalg.inv(to_units)
+
+
+class Preprocessor:
+    """Scans -> :class:`Frame` at the trajectory's scale, which it holds (auto: measured, then adopted)."""
+
+    def __init__(self, config: AlignerConfig) -> None:
+        self.config = config
+        self._fixed_scale = config.preprocess.scale if config.preprocess.scale > 0 else None
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget an auto scale: the next adopted frame measures it again."""
+        self.scale: Optional[float] = self._fixed_scale
+        self.voxel = 0.0
+
+    def frame(self, points: np.ndarray, scale: Optional[float] = None) -> Frame:
+        """Metres, cropped and voxelised at ``scale`` (default: the trajectory's; auto: this scan's robust radius).
+
+        Raises ScanRejected.
+        """
+        cfg = self.config.preprocess
+        cropped = crop_range(finite_points(points), cfg.min_range, cfg.max_range)
+        if len(cropped) < cfg.min_points:
+            raise ScanRejected(f"too few points: {len(cropped)} after range crop, need {cfg.min_points}",
+                               "too_few_points")
+        scale = self.scale if scale is None else scale
+        if scale is None:
+            scale = robust_radius(cropped)
+            if not scale > 0:
+                raise ScanRejected("degenerate cloud: all points coincide, cannot measure its scale", "degenerate")
+        voxel = max(cfg.voxel_size if cfg.voxel_size != 0 else scale / 100.0, 0.0)
+        dense = voxel_downsample(cropped, voxel)
+        if len(dense) < cfg.min_points:
+            raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {cfg.min_points}",
+                               "too_few_points")
+        seed = max(self.config.registration.seed, 0)
+        near = dense[np.einsum("ij,ij->i", dense, dense) <= (cfg.cem_radius * scale) ** 2]
+        near = near if len(near) >= cfg.min_points else dense
+        return Frame(dense, subsample(dense, self.config.polish.points, "random", seed),
+                     subsample(near, self.config.registration.n_points, cfg.sampling, seed), near, scale, voxel)
+
+    def adopt(self, frame: Frame) -> None:
+        """The frame's units become the trajectory's (the first scan of a trajectory, a pair target)."""
+        self.scale, self.voxel = frame.scale, frame.voxel
+
+    def rescaled_if_lost(self, frame: Frame) -> Frame:
+        """Auto scale: a restart after being lost measures the scale again when this scan's differs by more than
+        ``LOST_RESCALE_RATIO`` (the trajectory may have started from a scan that was not representative)."""
+        if self._fixed_scale is not None or self.scale is None:
+            return frame
+        radius = robust_radius(frame.dense)
+        if not self.scale / LOST_RESCALE_RATIO <= radius <= LOST_RESCALE_RATIO * self.scale:
+            try:
+                frame = self.frame(frame.dense, scale=radius)
+            except ScanRejected:
+                return frame
+            self.adopt(frame)
+        return frame
+
+    def new_map(self) -> VoxelMap:
+        """An empty local map for frames of the adopted units."""
+        if self.scale is None:
+            raise RuntimeError("no scale adopted yet: a map needs the trajectory's units")
+        voxel = self.voxel if self.voxel > 0 else self.scale / 100.0
+        max_range = self.config.preprocess.max_range
+        return VoxelMap(voxel * self.config.map.voxel_factor, self.config.map.points_per_voxel,
+                        max_range if max_range > 0 else 10.0 * self.scale)

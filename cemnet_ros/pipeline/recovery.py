@@ -1,0 +1,101 @@
+"""Recovery (step 5 of the recipe in :mod:`.aligner`): the global CEM search when tracking cannot be trusted.
+
+It runs on the first pair, after a stamp gap, when tracking failed or on request: the search
+(:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation) returns
+distinct hypotheses; each one close to the best in fitness is polished and judged, and an ambiguity check between
+distinct near-ties keeps a symmetric scene from being published as a confident answer.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from cemnet_ros.core.geometry import apply_transform
+from cemnet_ros.core.global_search import global_search
+from cemnet_ros.pipeline.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.frame import Frame
+from cemnet_ros.pipeline.health import disagreement
+from cemnet_ros.pipeline.preprocess import subsample, voxel_downsample
+from cemnet_ros.pipeline.tracking import WIDER_LOOK, map_sample, wide_polish
+from cemnet_ros.pipeline.verdict import Estimate, StepJudge
+from cemnet_ros.pipeline.voxel_map import VoxelMap
+
+POLISH_FRACTION = 0.8  # hypotheses whose CEM fitness is this close to the best one's get polished
+DISTINCT_M, DISTINCT_RAD = 1.0, np.radians(5.0)  # answers farther apart are distinct hypotheses, not one basin
+
+
+class Recovery:
+    """The global search around a guess, its hypotheses polished and judged, the best one chosen."""
+
+    def __init__(self, config: AlignerConfig, spread: AdaptiveSpread, judge: StepJudge) -> None:
+        self.config = config
+        self.spread = spread
+        self.judge = judge
+
+    def recover(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray,
+                T_fallback: Optional[np.ndarray] = None) -> Estimate:
+        """The global CEM search around ``T_guess``, each distinct hypothesis polished; the best one judged.
+
+        ``T_fallback``: where to search instead when the map has no points near the guess (a wild prediction
+        left the map: where the map last grew). The scan is placed at the guess and the engine's units are
+        centred on the guessed sensor position, so that the search's yaw turns about the sensor and its
+        translation disc is the sensor's displacement.
+        """
+        cfg, rec = self.config, self.config.recovery
+        target = map_sample(cfg, frame, target_map, T_guess, rec.points, margin=rec.radius)
+        if len(target) < cfg.preprocess.min_points and T_fallback is not None:
+            T_guess = T_fallback
+            target = map_sample(cfg, frame, target_map, T_guess, rec.points, margin=rec.radius)
+        if len(target) < cfg.preprocess.min_points:
+            return self.judge.off_map(frame, T_guess, "guess", rec.radius)
+        to_units, from_units = frame.network_units(T_guess[:3, 3])
+        seed = max(cfg.registration.seed, 0)
+        # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
+        uniform = voxel_downsample(frame.near, target_map.voxel_size)
+        source = apply_transform(T_guess, subsample(uniform, rec.points, "random", seed))
+        hypotheses = global_search(apply_transform(to_units, source), apply_transform(to_units, target), np.zeros(6),
+                                   rec.radius / frame.scale, rec.search, seed=seed)
+        estimates = []
+        for hypothesis in hypotheses:
+            if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
+                break  # far behind the best: not worth a polish, nor a rival
+            T_cem = from_units @ hypothesis.T_target_source @ to_units @ T_guess
+            T_cem[3] = (0.0, 0.0, 0.0, 1.0)
+            polish = wide_polish(cfg, frame, target_map, T_cem)
+            estimates.append(self.judge.judge(frame, target_map, T_guess, T_cem, polish, 0.0, recovered=True,
+                                              prediction_std=rec.radius))
+        estimates.sort(key=lambda e: -e.signals.fitness)
+        return self._resolve_ambiguity(estimates, T_guess)
+
+    def _resolve_ambiguity(self, estimates: list[Estimate], T_guess: np.ndarray) -> Estimate:
+        """The fittest hypothesis, or among distinct near-ties the one next to the guess (a symmetric scene).
+
+        A tie resolved by a guess within the tracking spread is flagged with a note; ties all far from the
+        guess are a failure ("ambiguous").
+        """
+        ratio = self.config.recovery.ambiguity_ratio
+        best = estimates[0]
+        ties = [best]
+        for estimate in estimates[1:]:
+            if estimate.signals.fitness >= ratio * best.signals.fitness and all(
+                    _distinct(estimate.T_odom_sensor, kept.T_odom_sensor) for kept in ties):
+                ties.append(estimate)
+        if len(ties) == 1:
+            return best
+        rotation, translation = self.spread.spread()
+        nearest = min(ties, key=lambda e: e.offset_from(T_guess)[0])
+        metres, radians = nearest.offset_from(T_guess)
+        summary = f"{len(ties)} distinct hypotheses within {ratio:.2f} of the best fitness"
+        if metres <= WIDER_LOOK * translation and radians <= WIDER_LOOK * rotation:
+            nearest.notes.append(f"symmetric scene: {summary}, the one next to the motion prediction kept")
+            return nearest
+        best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")
+        return best
+
+
+def _distinct(T_a: np.ndarray, T_b: np.ndarray) -> bool:
+    """Two answers that are distinct hypotheses, not one basin."""
+    metres, radians = disagreement(T_a, T_b)
+    return metres > DISTINCT_M or radians > DISTINCT_RAD
