@@ -14,7 +14,7 @@ def test_default_register_with_bundled_network(bracket):
     angles, trans = np.radians([30.0, 10.0, -20.0]), np.array([0.3, -0.2, 0.1])
     tgt = bracket @ euler_to_matrix_np(angles).T + trans
     res = register(bracket, tgt)  # 1024 points: sub-sampled to 768
-    assert rotation_angle_deg(res.rotation, euler_to_matrix_np(angles)) < 0.5
+    assert rotation_angle_deg(res.rotation.T @ euler_to_matrix_np(angles)) < 0.5
     assert np.linalg.norm(res.translation - trans) < 0.01
     assert res.transform.shape == (4, 4) and 0.0 <= res.fitness <= 1.0
 
@@ -26,7 +26,7 @@ def test_prior_pose_replaces_the_network(bracket):
     res = register(bracket, tgt, FAST, prior_pose=prior, prior_sigma=np.full(6, 0.05))
     np.testing.assert_allclose(res.mu0, 0.0)
     np.testing.assert_allclose(res.sigma0, 0.05, rtol=1e-6)
-    assert rotation_angle_deg(res.rotation, euler_to_matrix_np(angles)) < 0.5
+    assert rotation_angle_deg(res.rotation.T @ euler_to_matrix_np(angles)) < 0.5
 
 
 def test_nan_rows_are_dropped_with_a_warning(bracket):
