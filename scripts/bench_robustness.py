@@ -37,6 +37,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
+from cemnet_ros.core.geometry import rotation_angle_deg  # noqa: E402
 from cemnet_ros.data.kitti import kitti_scans  # noqa: E402
 from cemnet_ros.data.scenes import (  # noqa: E402
     COURTYARD_BOUNDS,
@@ -50,7 +51,6 @@ from cemnet_ros.data.scenes import (  # noqa: E402
 from cemnet_ros.data.shared import shared_dir  # noqa: E402
 from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
 from cemnet_ros.io.console import log, progress  # noqa: E402
-from cemnet_ros.replay.trajectory import rotation_angle_deg  # noqa: E402
 
 SETS = ("kitti_gaps", "large_motion", "sequences", "corridor", "speed")
 METHODS = ("cemnet", "kiss-icp", "gicp")

@@ -19,7 +19,7 @@ def test_cem_without_network_recovers_known_transform(bracket):
     angles, trans = np.radians([20.0, -15.0, 10.0]), np.array([0.2, -0.1, 0.3])
     src, tgt = _pair(bracket, angles, trans)
     res = register(src, tgt, RegistrationConfig(prior="identity"))
-    assert rotation_angle_deg(res.rotation, euler_to_matrix_np(angles)) < 0.5
+    assert rotation_angle_deg(res.rotation.T @ euler_to_matrix_np(angles)) < 0.5
     assert np.linalg.norm(res.translation - trans) < 0.01
     assert res.fitness > 0.5
     assert (res.sigma < 0.05).all()  # the final spread has shrunk: a confident answer

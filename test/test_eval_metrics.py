@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.eval.metrics import aggregate, euler_error_deg, pair_metrics, rotation_error_deg
+from cemnet_ros.eval.metrics import aggregate, euler_error_deg, pair_metrics
 
 
 def _rot(z, y, x):
@@ -37,7 +37,7 @@ def test_wrapped_euler_difference():
 
 
 def test_isotropic_errors():
-    assert rotation_error_deg(_rot(0, 0, 30), np.eye(3)) == pytest.approx(30.0)
+    assert pair_metrics(_rot(0, 0, 30), np.zeros(3), np.eye(3), np.zeros(3)).rot_err_deg == pytest.approx(30.0)
     axis = np.array([1.0, 2.0, 2.0]) / 3.0
     r = Rotation.from_rotvec(np.radians(7.0) * axis).as_matrix()
     m = pair_metrics(r @ _rot(10, 20, 30), np.array([3.0, 4.0, 0.0]), _rot(10, 20, 30), np.zeros(3))

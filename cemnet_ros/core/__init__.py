@@ -5,11 +5,11 @@ names load torch on first use.
 """
 from .config import CEMConfig, RegistrationConfig
 
-__all__ = ["CEMConfig", "RegistrationConfig", "Registrar", "RegistrationResult", "register"]
+__all__ = ["BatchRegistrationResult", "CEMConfig", "RegistrationConfig", "Registrar", "RegistrationResult", "register"]
 
 
 def __getattr__(name: str):
-    if name in ("Registrar", "RegistrationResult", "register"):
+    if name in ("BatchRegistrationResult", "Registrar", "RegistrationResult", "register"):
         from . import registration
 
         return getattr(registration, name)

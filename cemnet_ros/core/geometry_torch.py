@@ -25,7 +25,9 @@ def matrix_to_euler(rotation: torch.Tensor) -> torch.Tensor:
 
 
 def transform_points(points: torch.Tensor, rotation: torch.Tensor, translation: torch.Tensor) -> torch.Tensor:
-    """Apply ``R p + t`` to (..., n, 3) points with (..., 3, 3) rotations and (..., 3) translations."""
+    """Apply ``R p + t`` to (..., n, 3) points with (..., 3, 3) rotations and (..., 3) translations.
+
+    Twin of ``geometry.apply_transform``, which takes a 4x4 ``T_target_source``."""
     return points @ rotation.transpose(-1, -2) + translation.unsqueeze(-2)
 
 
@@ -38,7 +40,8 @@ def procrustes(source: torch.Tensor, target: torch.Tensor, weights: torch.Tensor
                ) -> tuple[torch.Tensor, torch.Tensor]:
     """Batched weighted least-squares rigid fit ``target ~ R source + t`` (Kabsch, reflection-safe).
 
-    source, target: (B, n, 3); weights: (B, n) or None. Returns R (B, 3, 3), t (B, 3).
+    source, target: (B, n, 3); weights: (B, n) or None. Returns R (B, 3, 3), t (B, 3). Numpy twin (one pair, no
+    weights): ``geometry.procrustes_np``.
     """
     if weights is None:
         weights = torch.ones(source.shape[:-1], dtype=source.dtype, device=source.device)

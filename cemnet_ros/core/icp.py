@@ -1,8 +1,10 @@
 """Point-to-point ICP of one motion on numpy clouds: exact k-d tree correspondences, Kabsch (SVD) updates.
 
-The package's one such ICP: the optional final refinement of a registration (``refine_icp_steps``) and the
-classical baseline of the evaluation (:func:`cemnet_ros.eval.baselines.icp`). The CEM's own ICP steps run in
-numba on look-up lattices (:mod:`.lattice_rewards`), or batched in torch on CUDA (:mod:`.icp_torch`).
+The package's one such ICP: the optional final refinement of a registration (``CEMConfig.refine_icp_steps``)
+and the classical baseline of the evaluation (:func:`cemnet_ros.eval.baselines.icp`). The CEM's own ICP steps
+(``CEMConfig.icp_steps``, behind the future reward) run in numba on look-up lattices (:mod:`.lattice_rewards`),
+or batched in torch on CUDA (:mod:`.icp_torch`); the scan pipeline's polish is a point-to-plane ICP against its
+map (:mod:`cemnet_ros.pipeline.refine`).
 """
 from __future__ import annotations
 
@@ -11,15 +13,7 @@ from typing import Optional
 import numpy as np
 from scipy.spatial import cKDTree
 
-
-def kabsch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares ``R, t`` with ``target ~= R source + t`` for matched (n, 3) points (no reflection)."""
-    src_mean, tgt_mean = source.mean(0), target.mean(0)
-    cov = (source - src_mean).T @ (target - tgt_mean)
-    u, _, vt = np.linalg.svd(cov)
-    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T)) or 1.0])
-    rotation = vt.T @ fix @ u.T
-    return rotation, tgt_mean - rotation @ src_mean
+from .geometry import procrustes_np
 
 
 def point_to_point_icp(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
@@ -40,7 +34,7 @@ def point_to_point_icp(source: np.ndarray, target: np.ndarray, rotation: np.ndar
         keep = np.ones(len(moved), dtype=bool) if max_distance is None else distances <= max_distance
         if keep.sum() < 3:
             break
-        step_r, step_t = kabsch(moved[keep], target[index[keep]])
+        step_r, step_t = procrustes_np(moved[keep], target[index[keep]])
         rotation, translation = step_r @ rotation, step_r @ translation + step_t
         if tolerance is not None:
             error = float(distances[keep].mean())

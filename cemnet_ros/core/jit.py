@@ -13,11 +13,11 @@
   the others idle: this is what let a node fed 10x its rate fall well below its own capacity.
 - **threading layer**: OpenMP first, which is thread-safe when several threads launch parallel kernels at once
   (a node's worker and a caller), and skips the too-old TBB that some machines carry (numba warns about it on
-  every start otherwise). Set here, before any parallel kernel first runs.
-- **no on-disk cache** (no kernel sets ``cache=True``): kernels are compiled once per process (each
-  module's ``compile_kernels``; ~10 s for the lattice rewards), never loaded from numba's cache: the very same
-  machine code loaded from the cache ran 15-30% slower here than freshly compiled (measured: lattice rewards 11
-  vs 15 ms, fused 43 vs 50 ms per 1000 candidates; the cached object file was byte-identical).
+  every start otherwise). Set here, before any parallel kernel first runs. Threads: numba's default (all cores)
+  unless the trainer's ``threads`` sets fewer; a node process makes idle OpenMP threads sleep (``cemnet_ros.ros``).
+- **no on-disk cache** (:data:`CACHE`, never ``cache=True`` on a kernel): kernels are compiled once per process
+  (each module's ``compile_kernels``; ~10 s for the lattice rewards), never loaded from numba's cache, whose
+  byte-identical machine code ran 15-30% slower here than freshly compiled code (docs/evaluation.md).
 """
 from __future__ import annotations
 

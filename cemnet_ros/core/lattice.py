@@ -38,8 +38,8 @@ class Lattice(NamedTuple):
 def locality_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
     """Permutation that puts ``points`` (n, 3) in Z-order (Morton order) over their bounding box.
 
-    Queries made in this order touch neighbouring lattice nodes one after the other, so they hit the cache:
-    measured ~18% faster rewards and ICP steps than the clouds' own order on ModelNet pairs.
+    Queries made in this order touch neighbouring lattice nodes one after the other, so they hit the cache
+    (faster rewards and ICP steps than in the clouds' own order: docs/evaluation.md, "Where the time goes").
     """
     lo, hi = points.min(0), points.max(0)
     cells = ((points - lo) / np.maximum(hi - lo, 1e-12) * ((1 << bits) - 1)).astype(np.int64)
@@ -110,8 +110,8 @@ def _splat(points, origin, dims, spacing, radius, node_nearest):
 def nearest_sq(lattice, qx, qy, qz):
     """Squared distance to the nearest of the 8 surrounding nodes' points, and its row (the sentinel if none).
 
-    Unsigned indices spare numba's negative-index checks and float32 distances halve the gathered bytes:
-    together ~30% faster than signed float64 (measured on ModelNet pairs).
+    Unsigned indices spare numba's negative-index checks and float32 distances halve the gathered bytes
+    (docs/evaluation.md, "Where the time goes").
     """
     points, node_nearest, origin, dims = lattice.points, lattice.node_nearest, lattice.origin, lattice.dims
     fx = (qx - origin[0]) * lattice.inv_spacing

@@ -14,7 +14,7 @@ from . import lattice_rewards
 from .checkpoint import load_network
 from .config import RegistrationConfig, seed_or_none
 from .engine import CEMNet
-from .geometry import euler_to_matrix_np, matrix_to_action_np
+from .geometry import euler_to_matrix_np, matrix_to_action_np, rigid_transform
 from .icp import point_to_point_icp
 from .lattice_rewards import consensus_fitness
 
@@ -36,10 +36,31 @@ class RegistrationResult:
 
     @property
     def transform(self) -> np.ndarray:
-        out = np.eye(4)
-        out[:3, :3] = self.rotation
-        out[:3, 3] = self.translation
-        return out
+        """4x4 ``T_target_source``."""
+        return rigid_transform(self.rotation, self.translation)
+
+
+@dataclass
+class BatchRegistrationResult:
+    """The registrations of B pairs, row b for pair b: ``target_b ~= rotation[b] @ source_b + translation[b]``."""
+
+    rotation: np.ndarray  # (B, 3, 3)
+    translation: np.ndarray  # (B, 3)
+    sigma: np.ndarray  # (B, 6) final CEM spread (mu0's spread when the CEM did not run)
+    mu: np.ndarray  # (B, 6) final mean action
+    mu0: np.ndarray  # (B, 6) initial mean
+    sigma0: np.ndarray  # (B, 6)
+    fitness: np.ndarray  # (B,) max-consensus inlier score in [0, 1] at epsilon
+
+    def pair(self, b: int, runtime_s: float) -> RegistrationResult:
+        """The registration of pair ``b``, which took ``runtime_s``."""
+        return RegistrationResult(self.rotation[b], self.translation[b], self.sigma[b], self.mu[b], self.mu0[b],
+                                  self.sigma0[b], float(self.fitness[b]), runtime_s)
+
+
+def _float64_copy(values: torch.Tensor) -> np.ndarray:
+    """A float64 numpy copy of a tensor (never a view: the refinement writes into it)."""
+    return np.array(values.detach().double().cpu().numpy())
 
 
 def resolve_device(name: str) -> torch.device:
@@ -88,11 +109,10 @@ class Registrar:
 
     @torch.no_grad()
     def register_batch(self, source: torch.Tensor, target: torch.Tensor, mu0: torch.Tensor | None = None,
-                       sigma0: torch.Tensor | None = None, run_cem: bool = True) -> dict[str, np.ndarray]:
+                       sigma0: torch.Tensor | None = None, run_cem: bool = True) -> BatchRegistrationResult:
         """Register B pairs of prepared clouds (B, n, 3), (B, m, 3); ``run_cem=False`` returns mu0 alone."""
         source = source.to(self.device, torch.float32)
         target = target.to(self.device, torch.float32)
-        cem = self.config.cem
         if run_cem:
             out = self.engine(source, target, mu0, sigma0, generator=self._generator())
             mu, sigma, mu0, sigma0, fitness = out.mu, out.sigma, out.mu0, out.sigma0, out.fitness
@@ -100,22 +120,25 @@ class Registrar:
             if mu0 is None or sigma0 is None:
                 mu0, sigma0 = self.engine.initial_distribution(source, target)
             mu, sigma, fitness = mu0, sigma0, None
-        mu_np = mu.double().cpu().numpy()
-        rotation = euler_to_matrix_np(mu_np[:, :3])
-        translation = mu_np[:, 3:].copy()
-        src_np, tgt_np = source.cpu().numpy(), target.cpu().numpy()
-        refine = cem.refine_icp_steps > 0
-        fitness = np.empty(len(mu_np)) if fitness is None or refine else fitness.double().cpu().numpy()
-        for b in range(len(mu_np)):
-            if refine:
-                rotation[b], translation[b] = point_to_point_icp(src_np[b], tgt_np[b], rotation[b], translation[b],
-                                                                 cem.refine_icp_steps, max_distance=cem.epsilon)
-                mu_np[b] = matrix_to_action_np(np.block([[rotation[b], translation[b][:, None]], [0, 0, 0, 1]]))
-            if refine or not run_cem:
-                fitness[b] = consensus_fitness(src_np[b], tgt_np[b], rotation[b], translation[b], cem.epsilon)
-        return {"rotation": rotation, "translation": translation, "mu": mu_np,
-                "sigma": sigma.double().cpu().numpy(), "mu0": mu0.double().cpu().numpy(),
-                "sigma0": sigma0.double().cpu().numpy(), "fitness": fitness}
+        mu_np = _float64_copy(mu)
+        result = BatchRegistrationResult(euler_to_matrix_np(mu_np[:, :3]), mu_np[:, 3:].copy(), _float64_copy(sigma),
+                                         mu_np, _float64_copy(mu0), _float64_copy(sigma0),
+                                         np.empty(len(mu_np)) if fitness is None else _float64_copy(fitness))
+        if self.config.cem.refine_icp_steps > 0 or fitness is None:
+            self._refine_and_score(result, source.cpu().numpy(), target.cpu().numpy())
+        return result
+
+    def _refine_and_score(self, result: BatchRegistrationResult, sources: np.ndarray, targets: np.ndarray) -> None:
+        """In place: each motion refined by ``refine_icp_steps`` ICP steps (pairs within epsilon), then scored."""
+        cem = self.config.cem
+        for b in range(len(result.mu)):
+            if cem.refine_icp_steps > 0:
+                result.rotation[b], result.translation[b] = point_to_point_icp(
+                    sources[b], targets[b], result.rotation[b], result.translation[b], cem.refine_icp_steps,
+                    max_distance=cem.epsilon)
+                result.mu[b] = matrix_to_action_np(rigid_transform(result.rotation[b], result.translation[b]))
+            result.fitness[b] = consensus_fitness(sources[b], targets[b], result.rotation[b], result.translation[b],
+                                                  cem.epsilon)
 
     def register(self, source: np.ndarray, target: np.ndarray, prior_pose: Optional[np.ndarray] = None,
                  prior_sigma: Optional[np.ndarray] = None) -> RegistrationResult:
@@ -133,10 +156,8 @@ class Registrar:
             spread = self.config.prior_sigma if prior_sigma is None else prior_sigma
             mu0 = torch.as_tensor(matrix_to_action_np(prior_pose), dtype=torch.float32)[None]
             sigma0 = torch.as_tensor(np.asarray(spread, dtype=np.float64), dtype=torch.float32).reshape(1, 6)
-        out = self.register_batch(torch.from_numpy(src)[None], torch.from_numpy(tgt)[None], mu0, sigma0)
-        return RegistrationResult(out["rotation"][0], out["translation"][0], out["sigma"][0], out["mu"][0],
-                                  out["mu0"][0], out["sigma0"][0], float(out["fitness"][0]),
-                                  time.perf_counter() - start)
+        batch = self.register_batch(torch.from_numpy(src)[None], torch.from_numpy(tgt)[None], mu0, sigma0)
+        return batch.pair(0, time.perf_counter() - start)
 
 
 REGISTRARS_KEPT = 4  # distinct configs whose engine register() keeps (each holds a network): least recent out

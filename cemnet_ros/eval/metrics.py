@@ -14,7 +14,7 @@ from typing import Dict, Iterable, List
 
 import numpy as np
 
-from cemnet_ros.core.geometry import matrix_to_euler_np
+from cemnet_ros.core.geometry import matrix_to_euler_np, rotation_angle_deg
 
 RECALL_ROT_DEG = 1.0
 RECALL_TRANS = 0.01
@@ -41,12 +41,6 @@ def euler_error_deg(rotation_pred: np.ndarray, rotation_gt: np.ndarray) -> np.nd
     return (diff + 180.0) % 360.0 - 180.0
 
 
-def rotation_error_deg(rotation_pred: np.ndarray, rotation_gt: np.ndarray) -> float:
-    """Geodesic angle (degrees) of ``R_gt^T R_pred``."""
-    cos = (np.trace(np.asarray(rotation_gt).T @ np.asarray(rotation_pred)) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-
-
 def pair_metrics(rotation_pred: np.ndarray, translation_pred: np.ndarray,
                  rotation_gt: np.ndarray, translation_gt: np.ndarray) -> PairMetrics:
     """All per-pair errors of a prediction ``target ~= R_pred source + t_pred``."""
@@ -63,7 +57,7 @@ def pair_metrics(rotation_pred: np.ndarray, translation_pred: np.ndarray,
     return PairMetrics(
         r_mae_deg=float(np.mean(np.abs(e))), r_mse_deg2=float(np.mean(e ** 2)),
         t_mae=float(np.mean(np.abs(t_diff))), t_mse=float(np.mean(t_diff ** 2)),
-        rot_err_deg=rotation_error_deg(rotation_pred, rotation_gt), trans_err=float(np.linalg.norm(t_diff)),
+        rot_err_deg=rotation_angle_deg(rotation_gt.T @ rotation_pred), trans_err=float(np.linalg.norm(t_diff)),
     )
 
 

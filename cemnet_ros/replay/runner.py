@@ -18,6 +18,7 @@ from typing import Optional
 import numpy as np
 from tqdm import tqdm
 
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.odometry_output import OdometryOutput, odometry_output
@@ -143,7 +144,7 @@ class _Replayer:
                            stamp_ns, linear=out.linear, angular=out.angular, twist_covariance=out.twist_covariance)
         if node.publish_aligned_cloud:
             T_odom_sensor = out.T_odom_base @ self.base.T_base_sensor
-            aligned = points @ T_odom_sensor[:3, :3].T + T_odom_sensor[:3, 3]
+            aligned = apply_transform(T_odom_sensor, points)
             if node.aligned_cloud_voxel > 0:
                 from cemnet_ros.pipeline.preprocess import voxel_downsample
 

@@ -13,6 +13,7 @@ from typing import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cemnet_ros.core.geometry import apply_transform, procrustes_np, rigid_transform, rotation_angle_deg
 from cemnet_ros.io.atomic import atomic_write_text
 
 
@@ -25,7 +26,7 @@ class ATEResult:
     median: float
     max: float
     errors: np.ndarray  # (n,) per-pose position error, metres
-    alignment: np.ndarray  # (4,4) applied to the estimate: aligned = alignment @ est
+    alignment: np.ndarray  # (4,4) T_gt_est, from the estimate's world frame to the ground truth's: alignment @ est
 
 
 @dataclass
@@ -60,50 +61,20 @@ def _check_pair(est: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return est, gt
 
 
-def rotation_angle_deg(rotation: np.ndarray) -> float:
-    """Geodesic angle of a rotation matrix in degrees (robust near 0 and 180 degrees)."""
-    cos = (np.trace(rotation) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-
-
-def umeyama_alignment(source: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Rigid transform (4x4, no scale) minimising sum ||T source_i - target_i||^2 (Horn/Umeyama).
-
-    One point pins only the translation; two points leave a rotation about their axis free (the
-    minimal-angle solution from the SVD is returned).
-    """
-    src = np.asarray(source, dtype=np.float64)
-    dst = np.asarray(target, dtype=np.float64)
-    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) == 0:
-        raise ValueError(f"need two (n,3) arrays of equal shape, got {src.shape} and {dst.shape}")
-    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
-    cov = (dst - mu_d).T @ (src - mu_s) / len(src)
-    u, _, vt = np.linalg.svd(cov)
-    s = np.eye(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:
-        s[2, 2] = -1.0
-    rot = u @ s @ vt
-    out = np.eye(4)
-    out[:3, :3] = rot
-    out[:3, 3] = mu_d - rot @ mu_s
-    return out
-
-
 def absolute_trajectory_error(estimate: Sequence[np.ndarray], ground_truth: Sequence[np.ndarray]) -> ATEResult:
     """ATE of the positions after aligning the estimate onto the ground truth with a rigid transform."""
     est, gt = _check_pair(estimate, ground_truth)
     if len(est) == 0:
         raise ValueError("cannot compute ATE of an empty trajectory")
-    align = umeyama_alignment(est[:, :3, 3], gt[:, :3, 3])
-    aligned = est[:, :3, 3] @ align[:3, :3].T + align[:3, 3]
-    err = np.linalg.norm(aligned - gt[:, :3, 3], axis=1)
+    T_gt_est = rigid_transform(*procrustes_np(est[:, :3, 3], gt[:, :3, 3]))
+    err = np.linalg.norm(apply_transform(T_gt_est, est[:, :3, 3]) - gt[:, :3, 3], axis=1)
     return ATEResult(
         rmse=float(np.sqrt(np.mean(err**2))),
         mean=float(err.mean()),
         median=float(np.median(err)),
         max=float(err.max()),
         errors=err,
-        alignment=align,
+        alignment=T_gt_est,
     )
 
 
@@ -112,9 +83,9 @@ def relative_pose_errors(estimate: Sequence[np.ndarray], ground_truth: Sequence[
     est, gt = _check_pair(estimate, ground_truth)
     trans, rot = [], []
     for i in range(len(est) - 1):
-        rel_est = np.linalg.inv(est[i]) @ est[i + 1]
-        rel_gt = np.linalg.inv(gt[i]) @ gt[i + 1]
-        err = np.linalg.inv(rel_gt) @ rel_est
+        T_prev_curr_est = np.linalg.inv(est[i]) @ est[i + 1]
+        T_prev_curr_gt = np.linalg.inv(gt[i]) @ gt[i + 1]
+        err = np.linalg.inv(T_prev_curr_gt) @ T_prev_curr_est
         trans.append(float(np.linalg.norm(err[:3, 3])))
         rot.append(rotation_angle_deg(err[:3, :3]))
     return RPEResult(np.asarray(trans, dtype=np.float64), np.asarray(rot, dtype=np.float64))
@@ -179,9 +150,6 @@ def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             stamp = int(sec) * 1_000_000_000 + int((frac + "000000000")[:9] or 0)
         except ValueError as err:
             raise ValueError(f"{path}:{lineno}: {err}") from None
-        pose = np.eye(4)
-        pose[:3, :3] = Rotation.from_quat(vals[3:]).as_matrix()
-        pose[:3, 3] = vals[:3]
         stamps.append(stamp)
-        poses.append(pose)
+        poses.append(rigid_transform(Rotation.from_quat(vals[3:]).as_matrix(), vals[:3]))
     return np.asarray(stamps, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)

@@ -101,9 +101,8 @@ def _run_cemnet(registrar: Registrar, pairs: Sequence[RegistrationPair], batch_s
             res = registrar.register_batch(stack(batch, "source"), stack(batch, "target"), run_cem=run_cem)
             per_pair = (time.perf_counter() - began) / len(batch)
             for b in range(len(batch)):
-                extra = {"fitness": float(res["fitness"][b]), "sigma": res["sigma"][b].tolist(),
-                         "mu0": res["mu0"][b].tolist()}
-                out.append(_Prediction(res["rotation"][b], res["translation"][b], per_pair, extra))
+                extra = {"fitness": float(res.fitness[b]), "sigma": res.sigma[b].tolist(), "mu0": res.mu0[b].tolist()}
+                out.append(_Prediction(res.rotation[b], res.translation[b], per_pair, extra))
             bar.update(len(batch))
     return out
 
