@@ -17,6 +17,7 @@ from typing import Optional
 import numba
 import numpy as np
 
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.voxel_hash import EMPTY, insert_points, prune_far_voxels, rehash
 from cemnet_ros.pipeline.voxel_normals import NORMAL_RADIUS, estimate_normals
 from cemnet_ros.pipeline.voxel_query import nearest_batch, slots_within
@@ -115,8 +116,7 @@ class VoxelMap:
         source = np.asarray(source, dtype=np.float64).reshape(-1, 3)
         if len(source) == 0:
             return 0.0
-        T = np.asarray(T_map_source, dtype=np.float64)
-        dist, _ = self._query(source @ T[:3, :3].T + T[:3, 3], distance)
+        dist, _ = self._query(apply_transform(np.asarray(T_map_source, dtype=np.float64), source), distance)
         return float(np.count_nonzero(np.isfinite(dist))) / len(source)
 
     def sample(self, n: int, centre: np.ndarray, radius: float, seed: int = 0) -> np.ndarray:
