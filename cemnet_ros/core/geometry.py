@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+SMALL_ANGLE = 1e-4  # rad: below this the SE(3) exponential's coefficients use their Taylor series
+
 
 def euler_to_matrix_np(angles: np.ndarray) -> np.ndarray:
     """(..., 3) angles [z, y, x] in radians -> (..., 3, 3) rotation matrices (twin of ``euler_to_matrix``)."""
@@ -98,3 +100,47 @@ def procrustes_np(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, n
     fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T)) or 1.0])
     rotation = vt.T @ fix @ u.T
     return rotation, tgt_mean - rotation @ src_mean
+
+
+def se3_log(transform: np.ndarray) -> np.ndarray:
+    """Twist (6,) [rho, omega] of a rigid transform, ``transform = exp(twist^)`` (closed form).
+
+    Not scipy's ``logm``: with a multithreaded BLAS on a busy machine one call can take tens of milliseconds.
+    """
+    T = np.asarray(transform, dtype=np.float64)
+    omega = so3_log(T[:3, :3])
+    theta = float(np.linalg.norm(omega))
+    W = hat(omega)
+    if theta < 1e-2:  # the closed form cancels as 1 / theta^2: its Taylor series is exact to 1e-18 here
+        c = 1.0 / 12.0 + theta ** 2 / 720.0 + theta ** 4 / 30240.0
+    else:
+        c = (1.0 - theta * np.sin(theta) / (2.0 * (1.0 - np.cos(theta)))) / (theta * theta)
+    rho = (np.eye(3) - 0.5 * W + c * (W @ W)) @ T[:3, 3]  # V(omega)^-1 t
+    return np.r_[rho, omega]
+
+
+def se3_exp(twist: np.ndarray) -> np.ndarray:
+    """4x4 rigid transform exp(twist^) of a twist (6,) [rho, omega] (closed form; inverse of :func:`se3_log`)."""
+    xi = np.asarray(twist, dtype=np.float64)
+    W = hat(xi[3:])
+    a, b, c = (float(k[0]) for k in exp_coefficients(np.array([np.linalg.norm(xi[3:])])))
+    out = np.eye(4)
+    out[:3, :3] = np.eye(3) + a * W + b * (W @ W)
+    out[:3, 3] = (np.eye(3) + b * W + c * (W @ W)) @ xi[:3]
+    return out
+
+
+def hat(w: np.ndarray) -> np.ndarray:
+    """The 3x3 skew matrix [w]x of a vector (3,): hat(w) @ v = w x v."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def exp_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """sin(x)/x, (1 - cos x)/x^2, (x - sin x)/x^3 of the SE(3) exponential (Taylor series near 0)."""
+    small = theta < SMALL_ANGLE
+    x = np.where(small, 1.0, theta)
+    x2 = theta * theta
+    a = np.where(small, 1.0 - x2 / 6.0, np.sin(x) / x)
+    b = np.where(small, 0.5 - x2 / 24.0, (1.0 - np.cos(x)) / (x * x))
+    c = np.where(small, 1.0 / 6.0 - x2 / 120.0, (x - np.sin(x)) / (x * x * x))
+    return a, b, c

@@ -28,12 +28,11 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.core import Registrar
-from cemnet_ros.core.geometry import apply_transform
+from cemnet_ros.core.geometry import apply_transform, se3_log
 from cemnet_ros.pipeline import preprocess, refine
 from cemnet_ros.pipeline.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.covariance import flat_covariance
-from cemnet_ros.pipeline.deskew import se3_log
 from cemnet_ros.pipeline.frame import Frame, Preprocessor
 from cemnet_ros.pipeline.health import HealthMonitor
 from cemnet_ros.pipeline.input_checks import InputChecks

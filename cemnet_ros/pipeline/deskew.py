@@ -25,13 +25,12 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from cemnet_ros.core.geometry import so3_log
+from cemnet_ros.core.geometry import exp_coefficients, se3_log
 
 # Time field names, in order of preference when a cloud has several (relative offsets first: no precision loss).
 TIME_FIELDS = ("t", "time", "offset_time", "timestamp")
 MAX_OFFSET_S = 1.0  # a point's time this far from the stamp is implausible: the field was misread
 MIN_NANOSECONDS = 1e3  # a float field read as relative ns must reach 1 us (else it is a misread seconds field)
-_SMALL_ANGLE = 1e-4  # rad: below this the exp's coefficients use their Taylor series
 
 
 class TimeFieldError(ValueError):
@@ -89,38 +88,6 @@ def _readings(dtype: np.dtype, stamp_ns: int, name: str) -> list[tuple[str, Call
     raise TimeFieldError(f"time field {name!r} has dtype {dtype}, not an integer or float")
 
 
-def se3_log(transform: np.ndarray) -> np.ndarray:
-    """Twist (6,) [rho, omega] of a rigid transform, ``transform = exp(twist^)`` (closed form).
-
-    Not scipy's ``logm``: with a multithreaded BLAS on a busy machine one call can take tens of milliseconds.
-    """
-    T = np.asarray(transform, dtype=np.float64)
-    omega = so3_log(T[:3, :3])
-    theta = float(np.linalg.norm(omega))
-    W = _hat3(omega)
-    if theta < 1e-2:  # the closed form cancels as 1 / theta^2: its Taylor series is exact to 1e-18 here
-        c = 1.0 / 12.0 + theta ** 2 / 720.0 + theta ** 4 / 30240.0
-    else:
-        c = (1.0 - theta * np.sin(theta) / (2.0 * (1.0 - np.cos(theta)))) / (theta * theta)
-    rho = (np.eye(3) - 0.5 * W + c * (W @ W)) @ T[:3, 3]  # V(omega)^-1 t
-    return np.r_[rho, omega]
-
-
-def se3_exp(twist: np.ndarray) -> np.ndarray:
-    """4x4 rigid transform exp(twist^) of a twist (6,) [rho, omega] (closed form; inverse of :func:`se3_log`)."""
-    xi = np.asarray(twist, dtype=np.float64)
-    W = _hat3(xi[3:])
-    a, b, c = (float(k[0]) for k in _exp_coefficients(np.array([np.linalg.norm(xi[3:])])))
-    out = np.eye(4)
-    out[:3, :3] = np.eye(3) + a * W + b * (W @ W)
-    out[:3, 3] = (np.eye(3) + b * W + c * (W @ W)) @ xi[:3]
-    return out
-
-
-def _hat3(w: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
 def deskew(points: np.ndarray, times: np.ndarray, T_prev_curr: Optional[np.ndarray], dt: float,
            twist: Optional[np.ndarray] = None) -> np.ndarray:
     """Points measured at their own times ``times`` (s, relative to the stamp) -> the sensor frame at the stamp.
@@ -146,7 +113,7 @@ def deskew(points: np.ndarray, times: np.ndarray, T_prev_curr: Optional[np.ndarr
     # p' = p + a t (w x p) + b t^2 (w x (w x p) + w x r) + t r + c t^3 w x (w x r)  (Rodrigues, then V(t w) t r).
     # Written element-wise: an (n, 3) @ (3, 3) product goes through multithreaded BLAS, slow on a busy machine.
     r, w = xi[:3], xi[3:]
-    a, b, c = _exp_coefficients(np.abs(t) * np.linalg.norm(w))
+    a, b, c = exp_coefficients(np.abs(t) * np.linalg.norm(w))
     a *= t
     b *= t * t
     c *= t ** 3
@@ -160,14 +127,3 @@ def deskew(points: np.ndarray, times: np.ndarray, T_prev_curr: Optional[np.ndarr
         double_k = w[k] * dot - (w @ w) * pts[:, k]  # (w x (w x p))_k
         out[:, k] = pts[:, k] + a * cross_k + b * (double_k + wr[k]) + t * r[k] + c * wwr[k]
     return out
-
-
-def _exp_coefficients(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """sin(x)/x, (1 - cos x)/x^2, (x - sin x)/x^3 of the SE(3) exponential (Taylor series near 0)."""
-    small = theta < _SMALL_ANGLE
-    x = np.where(small, 1.0, theta)
-    x2 = theta * theta
-    a = np.where(small, 1.0 - x2 / 6.0, np.sin(x) / x)
-    b = np.where(small, 0.5 - x2 / 24.0, (1.0 - np.cos(x)) / (x * x))
-    c = np.where(small, 1.0 / 6.0 - x2 / 120.0, (x - np.sin(x)) / (x * x * x))
-    return a, b, c

@@ -16,8 +16,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.pipeline.deskew import deskew, se3_exp
+from cemnet_ros.core.geometry import apply_transform, se3_exp
+from cemnet_ros.pipeline.deskew import deskew
 from cemnet_ros.pipeline.frame import Preprocessor
 from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.verdict import AlignmentStep
