@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from script_loader import load_script
 
 from cemnet_ros.data import scenes
+from cemnet_ros.data.bags import write_bag
 from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
@@ -25,10 +25,6 @@ REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
 
 
-def _make_bags_module():
-    return load_script("make_bags")
-
-
 @pytest.fixture(scope="module")
 def tiny_bag(tmp_path_factory) -> Path:
     """4 ray-cast scans (16 beams x 360 steps) of the synthetic courtyard with ground truth."""
@@ -36,7 +32,7 @@ def tiny_bag(tmp_path_factory) -> Path:
     rng = np.random.default_rng(3)
     frames = [(scenes.lidar_scan(scene, pose, lidar, rng), pose) for pose in scenes.synthetic_trajectory(4)]
     path = tmp_path_factory.mktemp("bags") / "tiny.mcap"
-    _make_bags_module().write_bag(path, frames, "lidar", 100_000_000)
+    write_bag(path, frames, "lidar", 100_000_000)
     return path
 
 
