@@ -150,6 +150,18 @@ def test_replay_reports_rejected_scans_and_goes_on(tmp_path, capsys):
     assert "rejected scans: 1" in report and "skipped 1 of 4 messages: 1 " in report
 
 
+def test_replay_with_no_usable_scan_exits_1(tmp_path, capsys):
+    bag = tmp_path / "tiny_clouds.mcap"
+    with BagWriter(bag) as writer:
+        for i in range(2):
+            writer.write_cloud("/cloud", np.random.default_rng(i).uniform(-5, 5, size=(10, 3)), "cam", 10**18 + i)
+    out = tmp_path / "out"
+    assert main([str(bag), "--out", str(out), "--quiet", "--no-plot"]) == 1
+    last = capsys.readouterr().err.splitlines()[-1]  # after the warning on the first skipped message
+    assert last.startswith("cemnet-replay: no scan could be processed (skipped 2 of 2 messages: 2 too_few_points")
+    assert not (out / "summary.json").exists()
+
+
 @pytest.mark.parametrize("argv, message", [
     (["{tmp}/missing.mcap"], "bag not found"),
     (["{bag}", "--topic", "/nope"], "topic /nope not in"),
