@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from cemnet_ros.io.atomic import atomic_write_text
+from cemnet_ros.io.atomic import write_report
 from cemnet_ros.tools import eval_cli
 
 # Official checkpoint per setting (file names of the CEMNet release).
@@ -72,9 +72,8 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(f"| {setting} | {name} | {agg['r_mae_deg']:.4f} | {agg['t_mae']:.6f} | {agg['recall']:.3f} "
                          f"| {agg['n_pairs']} |")
     table = "\n".join(lines) + "\n"
-    args.out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(args.out / "ablation.md", table)
-    atomic_write_text(args.out / "ablation.json", json.dumps(results, indent=2) + "\n")
+    write_report(args.out / "ablation.md", table)
+    write_report(args.out / "ablation.json", json.dumps(results, indent=2) + "\n")
     print(table)
     return 0
 

@@ -20,7 +20,6 @@ Prints a table; the JSON is written atomically.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -28,7 +27,7 @@ from pathlib import Path
 
 import rclpy
 
-from cemnet_ros.io.atomic import atomic_write_text, jsonable
+from cemnet_ros.io.atomic import json_text, write_report
 from cemnet_ros.ros.probe import (
     REPO,
     Probe,
@@ -128,23 +127,29 @@ def main() -> None:
             ("overload_100hz", lambda p, f, pid: stream(p, standing, 100.0, args.overload_seconds, f, pid))], msgs)
     finally:
         rclpy.try_shutdown()
-    rate = best_effort["rate_10hz"]
     results = {"publisher": args.publisher, "points_per_scan": int(clouds[0].width),
                "bytes_per_scan": len(clouds[0].data), "best_effort": best_effort, "reliable": reliable}
-    print("| run | published | received | processed | drops | odometry Hz | capacity Hz | vs capacity | "
-          "RSS max-min MB |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print(table(best_effort, reliable))
+    write_report(args.out, json_text(results, indent=2))
+
+
+def table(best_effort: dict, reliable: dict) -> str:
+    """The runs' counts and rates against each session's capacity, then the capacities and the 10 Hz delivery."""
+    rate = best_effort["rate_10hz"]
+    lines = ["| run | published | received | processed | drops | odometry Hz | capacity Hz | vs capacity | "
+             "RSS max-min MB |", "|---|---|---|---|---|---|---|---|---|"]
     for label, r, capacity in (("10 Hz best effort", rate, None),
                                ("100 Hz best effort", best_effort["overload_100hz"], best_effort["capacity"]["hz"]),
                                ("100 Hz reliable", reliable["overload_100hz"], reliable["capacity"]["hz"])):
         versus = "- | -" if capacity is None else f"{capacity:.2f} | {r['odometry_hz'] / capacity:.2f}"
-        print(f"| {label} | {r['published']} | {r['received']} | {r['processed']} | {r['drops']} | "
-              f"{r['odometry_hz']:.2f} | {versus} | {r['rss_max_mb'] - r['rss_min_mb']:.0f} |")
-    print(f"capacity (closed loop; the session's own, standing): best effort {best_effort['capacity']['hz']:.2f} Hz "
-          f"(moving {best_effort['capacity_moving']['hz']:.2f} Hz), reliable {reliable['capacity']['hz']:.2f} Hz; "
-          f"10 Hz delivery {rate['received'] / rate['published']:.1%}, "
-          f"processed {rate['processed'] / rate['published']:.1%}")
-    atomic_write_text(args.out, json.dumps(jsonable(results), indent=2))
+        lines.append(f"| {label} | {r['published']} | {r['received']} | {r['processed']} | {r['drops']} | "
+                     f"{r['odometry_hz']:.2f} | {versus} | {r['rss_max_mb'] - r['rss_min_mb']:.0f} |")
+    capacity, moving = best_effort["capacity"]["hz"], best_effort["capacity_moving"]["hz"]
+    lines.append(f"capacity (closed loop; the session's own, standing): best effort {capacity:.2f} Hz "
+                 f"(moving {moving:.2f} Hz), reliable {reliable['capacity']['hz']:.2f} Hz; "
+                 f"10 Hz delivery {rate['received'] / rate['published']:.1%}, "
+                 f"processed {rate['processed'] / rate['published']:.1%}")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import platform
 import sys
 import time
@@ -32,26 +31,16 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
+from cemnet_ros.bench.metrics import ate_first_pose, percentile  # noqa: E402
 from cemnet_ros.data.scenes import LidarModel  # noqa: E402
 from cemnet_ros.data.skewed import SPEED, YAW_RATE_DEG, SkewedSequence, skewed_sequence  # noqa: E402
-from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
+from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.io.console import log, progress  # noqa: E402
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, relative_pose_errors  # noqa: E402
 
 MODES = ("off", "on")
 FULL = {"drives": 3, "scans": 50, "beams": 32, "azimuth": 1000}
 QUICK = {"drives": 1, "scans": 12, "beams": 16, "azimuth": 360}
-
-
-def ate_first_pose(estimated: list[np.ndarray], truth: list[np.ndarray]) -> float:
-    """Position RMSE (m) after expressing both trajectories in their first pose's frame (no other alignment)."""
-    est0, gt0 = np.linalg.inv(estimated[0]), np.linalg.inv(truth[0])
-    diff = [(est0 @ e)[:3, 3] - (gt0 @ g)[:3, 3] for e, g in zip(estimated, truth)]
-    return float(np.sqrt(np.mean(np.sum(np.square(diff), axis=1))))
-
-
-def _percentile(values: list[float], q: float) -> Optional[float]:
-    return float(np.percentile(values, q)) if values else None
 
 
 def run_drive(sequence: SkewedSequence, deskew: bool, label: str, with_times: bool = True) -> dict:
@@ -74,7 +63,7 @@ def run_drive(sequence: SkewedSequence, deskew: bool, label: str, with_times: bo
         truth.append(pose_true)
         flagged += int(not step.accepted and k > 0)
     out = {"processed": len(poses), "failed": len(errors), "errors": errors, "flagged": flagged,
-           "ms_median": _percentile(ms[1:], 50), "ms_p90": _percentile(ms[1:], 90),
+           "ms_median": percentile(ms[1:], 50), "ms_p90": percentile(ms[1:], 90),
            "ate_m": None, "ate_aligned_m": None, "rpe_trans_mean_m": None, "rpe_rot_mean_deg": None,
            "end_error_m": None, "poses": poses}
     if len(poses) >= 2:
@@ -143,9 +132,7 @@ def summarize(drives: list[dict]) -> dict:
 
 def write_json(path: Path, meta: dict, drives: list[dict]) -> None:
     """Atomic JSON of everything measured so far."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    body = {"meta": meta, "drives": drives, "summary": summarize(drives) if drives else {}}
-    atomic_write_text(path, json.dumps(jsonable(body), indent=1, allow_nan=False) + "\n")
+    write_report(path, json_text({"meta": meta, "drives": drives, "summary": summarize(drives) if drives else {}}))
 
 
 def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:

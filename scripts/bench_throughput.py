@@ -15,6 +15,7 @@ consecutive scans stay neighbours), else ray-cast synthetic 64-beam scans of the
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import threading
 import time
@@ -28,16 +29,18 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.data.shared import shared_dir  # noqa: E402
+from cemnet_ros.bench.speed import ping_pong_cycle  # noqa: E402
+from cemnet_ros.data.kitti import kitti_scans  # noqa: E402
+from cemnet_ros.data.shared import SHARED  # noqa: E402
 from cemnet_ros.pipeline.worker import BoundedWorker  # noqa: E402
 from cemnet_ros.ros.node_config import NodeConfig  # noqa: E402
 
-KITTI = (shared_dir() or REPO.parent / "shared") / "data" / "kitti_sample" / "velodyne"
+KITTI = SHARED / "data" / "kitti_sample"
 
 
-def kitti_scans() -> list[np.ndarray]:
-    return [np.fromfile(p, dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64)
-            for p in sorted(KITTI.glob("*.bin"))]
+def kitti_points() -> list[np.ndarray]:
+    """The sample's full-resolution scans, float64 (their poses are not needed here)."""
+    return [points.astype(np.float64) for points, _ in kitti_scans(KITTI)]
 
 
 def synthetic_scans(n: int = 6) -> list[np.ndarray]:
@@ -47,13 +50,6 @@ def synthetic_scans(n: int = 6) -> list[np.ndarray]:
     lidar = LidarModel(n_beams=64, n_azimuth=1940, elevation_deg=(-24.8, 2.0))
     scene, rng = courtyard_scene(), np.random.default_rng(0)
     return [lidar_scan(scene, pose, lidar, rng).astype(np.float64) for pose in synthetic_trajectory(n)]
-
-
-def ping_pong(n: int):
-    """0, 1, ..., n-1, n-2, ..., 1, 0, 1, ...: consecutive items are always neighbours."""
-    order = list(range(n)) + list(range(n - 2, 0, -1)) if n > 1 else [0]
-    while True:
-        yield from order
 
 
 @dataclass
@@ -86,6 +82,28 @@ class BenchResult:
                 f"{'YES' if kept_up else 'NO'}")
 
 
+class Producer(threading.Thread):
+    """Submits (submit time, scan, stamp_ns) into ``worker`` at ``rate_hz`` for ``duration_s``, the scans in
+    ping-pong order (consecutive scans are neighbours); ``submitted`` counts them."""
+
+    def __init__(self, worker: BoundedWorker, scans: list[np.ndarray], rate_hz: float, duration_s: float) -> None:
+        super().__init__(name="bench-producer", daemon=True)
+        self.worker, self.scans, self.rate_hz, self.duration_s = worker, scans, rate_hz, duration_s
+        self.submitted = 0
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        period, start, order = 1.0 / self.rate_hz, time.monotonic(), itertools.cycle(ping_pong_cycle(len(self.scans)))
+        while not self.stop.is_set():
+            due = start + self.submitted * period
+            if due - start >= self.duration_s:
+                return
+            time.sleep(max(0.0, due - time.monotonic()))
+            stamp_ns = int(1e18) + int(self.submitted * period * 1e9)
+            self.worker.submit((time.monotonic(), self.scans[next(order)], stamp_ns))
+            self.submitted += 1
+
+
 def run_stream(name: str, process: Callable[[np.ndarray, int], None], scans: list[np.ndarray], rate_hz: float,
                duration_s: float, queue_size: int) -> BenchResult:
     """Submit scans at ``rate_hz`` for ``duration_s`` into a BoundedWorker running ``process``; then drain."""
@@ -102,32 +120,18 @@ def run_stream(name: str, process: Callable[[np.ndarray, int], None], scans: lis
             startup_drops.append(worker.stats().drops)
 
     worker = BoundedWorker(handle, maxsize=queue_size, name=f"bench-{name}")
-    submitted = 0
-    stop = threading.Event()
-
-    def producer():
-        nonlocal submitted
-        period, start, order = 1.0 / rate_hz, time.monotonic(), ping_pong(len(scans))
-        while not stop.is_set():
-            due = start + submitted * period
-            if due - start >= duration_s:
-                return
-            time.sleep(max(0.0, due - time.monotonic()))
-            worker.submit((time.monotonic(), scans[next(order)], int(1e18) + int(submitted * period * 1e9)))
-            submitted += 1
-
+    producer = Producer(worker, scans, rate_hz, duration_s)
     start = time.monotonic()
-    thread = threading.Thread(target=producer, name="bench-producer", daemon=True)
-    thread.start()
+    producer.start()
     try:
-        thread.join()
+        producer.join()
         end = time.monotonic()
         worker.wait_idle(timeout=120.0)  # drain: queued scans then wait for their predecessors, not realistic
     finally:
-        stop.set()
+        producer.stop.set()
         worker.close()
     stats = worker.stats()
-    return BenchResult(name, submitted, stats.processed, stats.errors, stats.drops, end - start,
+    return BenchResult(name, producer.submitted, stats.processed, stats.errors, stats.drops, end - start,
                        sum(1 for _, _, done in records if done <= end),
                        [done - sub for sub, started, done in records if started <= end],
                        startup_drops[0] if startup_drops else 0)
@@ -171,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     use_kitti = args.source == "kitti" or (args.source == "auto" and KITTI.is_dir())
     if args.source == "kitti" and not KITTI.is_dir():
         parser.error(f"{KITTI} not found")
-    scans = kitti_scans() if use_kitti else synthetic_scans()
+    scans = kitti_points() if use_kitti else synthetic_scans()
     print(f"scans: {'KITTI (real)' if use_kitti else 'synthetic'}, {len(scans)} distinct, "
           f"{int(np.mean([len(s) for s in scans]))} points each; {args.rate:g} Hz for {args.duration:g} s, "
           f"queue {args.queue_size}")

@@ -20,14 +20,13 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
+from cemnet_ros.data import shared  # noqa: E402
+from cemnet_ros.data.bags import write_bag  # noqa: E402
 from cemnet_ros.data.kitti import kitti_frames  # noqa: E402
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory  # noqa: E402
-from cemnet_ros.data.shared import shared_dir  # noqa: E402
 from cemnet_ros.pipeline.preprocess import voxel_downsample  # noqa: E402
-from cemnet_ros.replay.bag_io import BagWriter  # noqa: E402
 
-SHARED = (shared_dir() or REPO.parent / "shared") / "data"
-WORLD_FRAME = "world"
+SHARED = shared.SHARED / "data"
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -54,20 +53,8 @@ def rgbd_frames(root: Path, stride: int, voxel: float, max_depth: float):
 
 
 # ----------------------------------------------------------------------------------------------------------
-# Bags
+# Bags (the format: cemnet_ros.data.bags)
 # ----------------------------------------------------------------------------------------------------------
-def write_bag(path: Path, frames, sensor_frame: str, period_ns: int, start_ns: int = 1_700_000_000_000_000_000) -> dict:
-    """Write (points, T_world_sensor) frames as /points + /ground_truth; returns a small summary."""
-    counts = []
-    with BagWriter(path) as bag:
-        for i, (points, pose) in enumerate(frames):
-            stamp = start_ns + i * period_ns
-            bag.write_cloud("/points", points, sensor_frame, stamp)
-            bag.write_pose("/ground_truth", pose, WORLD_FRAME, stamp)
-            counts.append(len(points))
-    return {"bag": str(path), "scans": len(counts), "points_mean": int(np.mean(counts)), "bytes": path.stat().st_size}
-
-
 BAG_NAMES = {"synthetic": "synthetic_lidar.mcap", "kitti": "kitti_00_6scans.mcap", "rgbd": "rgbd_7scenes_50.mcap"}
 
 

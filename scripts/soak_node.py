@@ -21,7 +21,6 @@ is neither is reported as lost.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import random
 import sys
@@ -35,7 +34,7 @@ from builtin_interfaces.msg import Time
 from sensor_msgs.msg import PointCloud2, PointField
 
 from cemnet_ros.data.hostile import FRAME, corpus
-from cemnet_ros.io.atomic import atomic_write_bytes, atomic_write_text, jsonable
+from cemnet_ros.io.atomic import atomic_write_bytes, json_text, write_report
 from cemnet_ros.ros.probe import (
     REPO,
     Probe,
@@ -119,6 +118,7 @@ class Soak:
 
 
 def run(args: argparse.Namespace) -> dict:
+    """The node started, warmed up, then soaked for ``args.minutes``: the summary of what happened."""
     clouds = kitti_clouds(frame_id=FRAME)  # the hostile cases' frame: each is refused for its own fault
     scans = serialized(clouds)
     os.environ.update(dds_environment())  # before rclpy starts and the node process inherits it
@@ -127,36 +127,13 @@ def run(args: argparse.Namespace) -> dict:
     probe = Probe(NS, reliable=True, name="soak_probe")
     try:
         soak = Soak(probe, scans, clouds, node.pid)
-        deadline = time.monotonic() + 180.0  # the engine loads, the kernels compile
-        while not probe.odometry and time.monotonic() < deadline and node.poll() is None:
-            soak.publish_scan()
-            time.sleep(0.5)
-        if not probe.odometry:
-            raise RuntimeError("the node produced no odometry: " + node_log(node)[-2000:])
-        time.sleep(2.0)
-        base = _totals(probe, soak)
+        _await_odometry(soak, probe, node)
+        base = {key: probe.counter(key) for key in ("received", "queue_drops", "errors", "recoveries")}
         soak.published.clear()
         soak.unstamped = 0
         soak.bad.clear()
         verdicts0 = len(probe.verdicts)
-        start = time.monotonic()
-        next_tick, next_fault, next_sample, next_print = start, start + args.fault_every, start, start
-        k, end = 0, start + 60.0 * args.minutes
-        while time.monotonic() < end:
-            now = time.monotonic()
-            if now >= next_fault:
-                soak.inject(FAULTS[k % len(FAULTS)], now - start)
-                k, next_fault = k + 1, now + args.fault_every
-            else:
-                soak.publish_scan()
-            if now >= next_sample:
-                soak.rss.append((now - start, rss_mb(node.pid)))
-                next_sample += 1.0
-            if now >= next_print:
-                _progress(now - start, args.minutes, probe, soak)
-                next_print += 30.0
-            next_tick = max(next_tick + 1.0 / RATE_HZ, time.monotonic())  # no catch-up burst after a fault
-            time.sleep(max(0.0, next_tick - time.monotonic()))
+        start = _stream(soak, probe, node, args)
         time.sleep(5.0)  # the queue drains, a last diagnostics report arrives
         return _summary(soak, probe, probe.verdicts[verdicts0:], base, start, args)
     finally:
@@ -166,16 +143,47 @@ def run(args: argparse.Namespace) -> dict:
         rclpy.try_shutdown()
 
 
+def _await_odometry(soak: Soak, probe: Probe, node) -> None:
+    """Scans every 0.5 s until the node answers (the engine loads, the kernels compile; 180 s at most)."""
+    deadline = time.monotonic() + 180.0
+    while not probe.odometry and time.monotonic() < deadline and node.poll() is None:
+        soak.publish_scan()
+        time.sleep(0.5)
+    if not probe.odometry:
+        raise RuntimeError("the node produced no odometry: " + node_log(node)[-2000:])
+    time.sleep(2.0)
+
+
+def _stream(soak: Soak, probe: Probe, node, args: argparse.Namespace) -> float:
+    """Scans at RATE_HZ for ``args.minutes``, a fault every ``args.fault_every`` s in their place, the node's RSS
+    every second and a progress line every 30 s. Returns the start (time.monotonic())."""
+    start = time.monotonic()
+    next_tick, next_fault, next_sample, next_print = start, start + args.fault_every, start, start
+    k, end = 0, start + 60.0 * args.minutes
+    while time.monotonic() < end:
+        now = time.monotonic()
+        if now >= next_fault:
+            soak.inject(FAULTS[k % len(FAULTS)], now - start)
+            k, next_fault = k + 1, now + args.fault_every
+        else:
+            soak.publish_scan()
+        if now >= next_sample:
+            soak.rss.append((now - start, rss_mb(node.pid)))
+            next_sample += 1.0
+        if now >= next_print:
+            _progress(now - start, args.minutes, probe, soak)
+            next_print += 30.0
+        next_tick = max(next_tick + 1.0 / RATE_HZ, time.monotonic())  # no catch-up burst after a fault
+        time.sleep(max(0.0, next_tick - time.monotonic()))
+    return start
+
+
 def _progress(elapsed: float, minutes: float, probe: Probe, soak: Soak) -> None:
     print(f"[soak] {elapsed / 60:.1f}/{minutes:.1f} min: {len(soak.published)} scans published, "
           f"{len(soak.faults)} faults, RSS {soak.rss[-1][1]:.0f} MB; node: drops {probe.counter('queue_drops')}, "
           f"errors {probe.counter('errors')}, global searches {probe.counter('recoveries')}, flagged "
           f"{probe.counter('flagged_steps')}, last: {probe.diagnostics.get('last_reason', '') or 'ok'}",
           file=sys.stderr, flush=True)
-
-
-def _totals(probe: Probe, soak: Soak) -> dict:
-    return {key: probe.counter(key) for key in ("received", "queue_drops", "errors", "recoveries")}
 
 
 def _summary(soak: Soak, probe: Probe, verdicts: list, base: dict, start: float, args: argparse.Namespace) -> dict:
@@ -282,9 +290,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=REPO / "results" / "soak")
     args = parser.parse_args()
     summary = run(args)
-    args.out.mkdir(parents=True, exist_ok=True)
     print(_report(summary))
-    atomic_write_text(args.out / "summary.json", json.dumps(jsonable(summary), indent=2))
+    write_report(args.out / "summary.json", json_text(summary, indent=2))
     _plot(summary, args.out / "soak.png")
     print(f"wrote {args.out / 'summary.json'} and {args.out / 'soak.png'}")
 

@@ -1,12 +1,11 @@
-"""Where the optional real data lives (../shared, found by :func:`cemnet_ros.data.shared.shared_dir`); tests that
+"""Where the optional real data lives (../shared: :data:`cemnet_ros.data.shared.SHARED`); tests that
 need it use :func:`requires_shared` and skip cleanly when it is absent."""
 from pathlib import Path
 
 import pytest
 
-from cemnet_ros.data.shared import REPO
+from cemnet_ros.data.shared import SHARED
 
-SHARED = REPO.parent / "shared"
 OFFICIAL_DIR = SHARED / "reference" / "cemnet_official"
 MODELNET = SHARED / "data" / "modelnet40_subset.npz"
 KITTI = SHARED / "data" / "kitti_sample"

@@ -25,8 +25,8 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
-from street_scene import make_transform, make_world  # noqa: E402
 
+from cemnet_ros.data.street import make_transform, make_world  # noqa: E402
 from cemnet_ros.pointcloud2 import decode_xyz, make_pointcloud2  # noqa: E402
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
 from cemnet_ros.ros.node_config import node_parameters, params_file_text  # noqa: E402

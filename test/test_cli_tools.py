@@ -132,8 +132,12 @@ def test_register_scale_handling(tmp_path, capsys):
     write_ply(tmp_path / "a.ply", big)
     write_ply(tmp_path / "b.ply", big + np.array([4.0, 0.0, 0.0]))
     assert register_cli.main([str(tmp_path / "a.ply"), str(tmp_path / "b.ply"), "--prior", "identity",
-                              "--scale", "40", *SMALL_CEM]) == 0
-    assert "scale 40" in capsys.readouterr().out
+                              "--scale", "40", "--json", str(tmp_path / "out" / "r.json"), *SMALL_CEM]) == 0
+    printed = capsys.readouterr().out
+    assert "scale 40" in printed
+    result = json.loads((tmp_path / "out" / "r.json").read_text())  # the printed figures, in JSON
+    assert result["scale"] == 40.0 and np.asarray(result["T_target_source"]).shape == (4, 4)
+    np.testing.assert_allclose(_parse_matrix(printed), result["T_target_source"], atol=1e-6)
 
 
 def test_register_errors(tmp_path, capsys):

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import PointCloud2, PointField
-from street_scene import make_transform
 from test_align_node import WORLD, Harness, context, pose_error, pose_of, wait_for  # noqa: F401 - the fixture
 
 from cemnet_ros.data.hostile import corpus
+from cemnet_ros.data.street import make_transform
 from cemnet_ros.pointcloud2 import make_pointcloud2
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow]

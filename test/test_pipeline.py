@@ -8,9 +8,9 @@ import time
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from street_scene import make_transform, make_world
 
 from cemnet_ros.core import CEMConfig, RegistrationConfig
+from cemnet_ros.data.street import make_transform, make_world
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
 from cemnet_ros.pipeline.input_checks import InputChecksConfig, ScanRejected

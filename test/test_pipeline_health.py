@@ -1,8 +1,8 @@
 """Adaptive spread, failure signals, Hessian covariance and degenerate directions (no engine needed)."""
 import numpy as np
 import pytest
-from street_scene import make_transform
 
+from cemnet_ros.data.street import make_transform
 from cemnet_ros.pipeline.adaptive import AdaptiveConfig, AdaptiveSpread
 from cemnet_ros.pipeline.covariance import (
     MIN_STD_ROTATION,

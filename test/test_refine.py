@@ -1,8 +1,8 @@
 """Point-to-plane ICP against a VoxelMap: convergence, its Hessian (parameterisation, degeneracy) and edge cases."""
 import numpy as np
 from scipy.spatial.transform import Rotation
-from street_scene import make_transform, make_world
 
+from cemnet_ros.data.street import make_transform, make_world
 from cemnet_ros.pipeline.refine import point_to_plane_icp
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from script_loader import load_script
 
 from cemnet_ros.data import scenes
+from cemnet_ros.data.bags import write_bag
 from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
@@ -25,10 +25,6 @@ REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
 
 
-def _make_bags_module():
-    return load_script("make_bags")
-
-
 @pytest.fixture(scope="module")
 def tiny_bag(tmp_path_factory) -> Path:
     """4 ray-cast scans (16 beams x 360 steps) of the synthetic courtyard with ground truth."""
@@ -36,7 +32,7 @@ def tiny_bag(tmp_path_factory) -> Path:
     rng = np.random.default_rng(3)
     frames = [(scenes.lidar_scan(scene, pose, lidar, rng), pose) for pose in scenes.synthetic_trajectory(4)]
     path = tmp_path_factory.mktemp("bags") / "tiny.mcap"
-    _make_bags_module().write_bag(path, frames, "lidar", 100_000_000)
+    write_bag(path, frames, "lidar", 100_000_000)
     return path
 
 
@@ -152,6 +148,18 @@ def test_replay_reports_rejected_scans_and_goes_on(tmp_path, capsys):
     assert summary["skipped_count"] == 1 and summary["skipped"][0]["reason"] == summary["rejected"][0]["reason"]
     report = capsys.readouterr().out
     assert "rejected scans: 1" in report and "skipped 1 of 4 messages: 1 " in report
+
+
+def test_replay_with_no_usable_scan_exits_1(tmp_path, capsys):
+    bag = tmp_path / "tiny_clouds.mcap"
+    with BagWriter(bag) as writer:
+        for i in range(2):
+            writer.write_cloud("/cloud", np.random.default_rng(i).uniform(-5, 5, size=(10, 3)), "cam", 10**18 + i)
+    out = tmp_path / "out"
+    assert main([str(bag), "--out", str(out), "--quiet", "--no-plot"]) == 1
+    last = capsys.readouterr().err.splitlines()[-1]  # after the warning on the first skipped message
+    assert last.startswith("cemnet-replay: no scan could be processed (skipped 2 of 2 messages: 2 too_few_points")
+    assert not (out / "summary.json").exists()
 
 
 @pytest.mark.parametrize("argv, message", [

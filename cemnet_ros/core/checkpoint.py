@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 import torch
 
+from ..io.atomic import atomic_file
 from .network import SamplingNetwork
 
 PACKAGE_WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
@@ -39,15 +39,8 @@ def save_weights(path: str | os.PathLike, state_dict: Mapping[str, torch.Tensor]
     arrays = {f"param/{k}": v.detach().cpu().numpy() for k, v in state_dict.items()}
     arrays["__meta__"] = np.frombuffer(json.dumps(dict(meta or {})).encode(), dtype=np.uint8)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez(handle, **arrays)  # type: ignore[arg-type]  # numpy stubs: the first keyword is allow_pickle
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_file(path) as handle:
+        np.savez(handle, **arrays)  # type: ignore[arg-type]  # numpy stubs: the first keyword is allow_pickle
     return path
 
 

@@ -120,6 +120,18 @@ def inside_obstacle(scene: Scene, points: np.ndarray, margin: float = 0.0):
     return hit if np.ndim(points) == 2 else bool(hit[0])
 
 
+def in_free_space(scene: Scene, positions: np.ndarray, bounds: tuple[float, float, float, float],
+                  margin: float = 1.0) -> bool:
+    """Whether every sensor position ((n, 3) metres) is inside ``bounds`` and ``margin`` clear of obstacles
+    (checked at its height and at 0.3 m, the vehicle's body)."""
+    positions = np.atleast_2d(positions)
+    x, y = positions[:, 0], positions[:, 1]
+    if not np.all((bounds[0] <= x) & (x <= bounds[1]) & (bounds[2] <= y) & (y <= bounds[3])):
+        return False
+    low = np.c_[x, y, np.full(len(x), 0.3)]
+    return not np.any(inside_obstacle(scene, positions, margin)) and not np.any(inside_obstacle(scene, low, margin))
+
+
 def random_sensor_pose(scene_bounds: tuple[float, float, float, float], rng: np.random.Generator,
                        scene: Scene | None = None, height: float = 1.8, tilt_deg: float = 1.0,
                        margin: float = 1.0) -> np.ndarray:

@@ -1,13 +1,14 @@
-"""Where the optional real data lives: ``shared/`` next to the repository (KITTI and 7-Scenes samples, ...)."""
+"""Where the optional real data lives: ``shared/`` next to the repository (KITTI and 7-Scenes samples, the official
+checkpoints, ...). The one place that says so: the tests, scripts and tools take :data:`SHARED` from here."""
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Optional
 
 REPO = Path(__file__).resolve().parents[2]
+SHARED = REPO.parent / "shared"
 
 
 def shared_dir() -> Optional[Path]:
-    """The repository root's sibling ``shared/`` folder, or None when it is absent."""
-    path = REPO.parent / "shared"
-    return path if path.is_dir() else None
+    """:data:`SHARED` (the repository root's sibling ``shared/`` folder), or None when it is absent."""
+    return SHARED if SHARED.is_dir() else None

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
@@ -17,7 +17,8 @@ PLY_TYPES = {
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
-_FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
+_BYTE_ORDERS = {"binary_little_endian": "<", "binary_big_endian": ">"}
+_FORMATS = ("ascii", *_BYTE_ORDERS)
 
 
 @dataclass
@@ -53,7 +54,7 @@ def _parse_header(path: Path, lines: List[str]) -> tuple[str, List[_Element]]:
     """(format, elements) of a PLY header (lines from ``ply`` to ``end_header``)."""
     if not lines or lines[0] != "ply":
         raise PointCloudFileError(path, "not a PLY file (first line is not 'ply')")
-    fmt = None
+    fmt: Optional[str] = None
     elements: List[_Element] = []
     for line in lines[1:-1]:
         words = line.split()
@@ -90,7 +91,7 @@ def read_ply(path: Path, raw: bytes) -> np.ndarray:
         raise PointCloudFileError(path, "PLY has 0 vertices: no points")
     if fmt == "ascii":
         return _ascii(path, body, elements[:index], vertex)
-    return _binary(path, body, _FORMATS[fmt], elements[:index], vertex)
+    return _binary(path, body, _BYTE_ORDERS[fmt], elements[:index], vertex)
 
 
 def _ascii(path: Path, body: bytes, before: List[_Element], vertex: _Element) -> np.ndarray:
@@ -151,13 +152,13 @@ def write_ply(path: PathLike, points: np.ndarray, dtype: type = np.float32) -> P
     points = np.asarray(points)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"write_ply needs an (n, 3) array, got shape {points.shape}")
-    dtype = np.dtype(dtype)
+    scalar = np.dtype(dtype)
     names = {np.dtype(np.float32): "float", np.dtype(np.float64): "double"}
-    if dtype not in names:
-        raise ValueError(f"write_ply dtype must be float32 or float64, not {dtype}")
+    if scalar not in names:
+        raise ValueError(f"write_ply dtype must be float32 or float64, not {scalar}")
     header = ("ply\nformat binary_little_endian 1.0\ncomment written by cemnet_ros\n"
               f"element vertex {len(points)}\n"
-              + "".join(f"property {names[dtype]} {axis}\n" for axis in "xyz")
+              + "".join(f"property {names[scalar]} {axis}\n" for axis in "xyz")
               + "end_header\n")
-    body = np.ascontiguousarray(points, dtype=dtype.newbyteorder("<")).tobytes()
+    body = np.ascontiguousarray(points, dtype=scalar.newbyteorder("<")).tobytes()
     return atomic_write_bytes(path, header.encode("ascii") + body)

@@ -7,12 +7,11 @@ then timed pair by pair with a wall clock; prints median and p90 latency and the
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import sys
 import time
-from pathlib import Path
-from typing import List, Optional, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any, List, Optional, Sequence
 
 import numpy as np
 import torch
@@ -20,14 +19,72 @@ from tqdm import tqdm
 
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.checkpoint import CheckpointError
+from cemnet_ros.core.config import RegistrationConfig
 from cemnet_ros.data.shapes import bracket_shape
 from cemnet_ros.eval.baselines import icp
 from cemnet_ros.eval.metrics import pair_metrics
 from cemnet_ros.eval.protocol import ProtocolConfig, RegistrationPair, load_shapes, make_pair
-from cemnet_ros.io.atomic import atomic_write_text
+from cemnet_ros.io.report import Report, emit
+from cemnet_ros.tools.cli_errors import reported_errors
 from cemnet_ros.tools.engine_args import add_engine_args, config_from_args
 
 PROG = "cemnet-bench"
+METHODS = ("cemnet", "icp")
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """What to time: ``pairs`` protocol pairs from ``data`` (None: a synthetic shape), after ``warmup`` calls."""
+
+    data: Optional[str] = None
+    pairs: int = 20
+    warmup: int = 2
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+
+    def __post_init__(self) -> None:
+        if self.pairs < 1 or self.warmup < 0:
+            raise ValueError("--pairs must be >= 1 and --warmup >= 0")
+
+
+@dataclass
+class BenchReport(Report):
+    """Per-pair wall times (s) and rotation errors (deg) of each method, and the machine's thread counts."""
+
+    config: BenchConfig
+    n_points: int
+    seconds: dict[str, list[float]]
+    rot_err_deg: dict[str, list[float]]
+    threads: dict[str, Optional[int]]
+
+    def stats(self) -> dict[str, dict[str, float]]:
+        out = {}
+        for name, seconds in self.seconds.items():
+            ms = np.asarray(seconds) * 1e3
+            out[name] = {"median_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
+                         "mean_ms": float(ms.mean()), "min_ms": float(ms.min()),
+                         "median_rot_err_deg": float(np.median(self.rot_err_deg[name]))}
+        return out
+
+    def ratio(self) -> float:
+        """CEMNet's median latency over ICP's."""
+        return float(np.median(self.seconds["cemnet"]) / np.median(self.seconds["icp"]))
+
+    def to_markdown(self) -> str:
+        cfg, cem, threads = self.config, self.config.registration.cem, self.threads
+        source = f"data {cfg.data}" if cfg.data else "synthetic shape"
+        lines = [f"{cfg.pairs} pairs of {self.n_points} points ({source});"
+                 f" CEM N={cem.n_candidates} T={cem.n_iters} M={cem.n_fused_iters}, prior={cfg.registration.prior};"
+                 f" threads: torch {threads['torch']} (interop {threads['torch_interop']}), numba {threads['numba']}",
+                 "| method | median ms | p90 ms | median rot err deg |", "|---|---:|---:|---:|"]
+        lines += [f"| {name} | {s['median_ms']:.1f} | {s['p90_ms']:.1f} | {s['median_rot_err_deg']:.3f} |"
+                  for name, s in self.stats().items()]
+        return "\n".join(lines + [f"CEMNet / ICP median latency ratio: {self.ratio():.1f}"])
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"config": {**asdict(self.config), "n_points": self.n_points, "python": platform.python_version(),
+                           "torch": torch.__version__, "threads": self.threads},
+                "stats": self.stats(), "ratio_median": self.ratio(),
+                "per_pair_ms": {name: [s * 1e3 for s in t] for name, t in self.seconds.items()}}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -52,12 +109,6 @@ def make_pairs(data: Optional[str], n_pairs: int) -> List[RegistrationPair]:
     return [make_pair(shapes[i % len(shapes)], np.random.default_rng(i), cfg) for i in range(n_pairs)]
 
 
-def _stats(seconds: Sequence[float]) -> dict:
-    ms = np.asarray(seconds) * 1e3
-    return {"median_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
-            "mean_ms": float(ms.mean()), "min_ms": float(ms.min())}
-
-
 def _numba_threads() -> Optional[int]:
     try:
         import numba
@@ -66,59 +117,38 @@ def _numba_threads() -> Optional[int]:
     return int(numba.get_num_threads())
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        if args.pairs < 1 or args.warmup < 0:
-            raise ValueError("--pairs must be >= 1 and --warmup >= 0")
-        pairs = make_pairs(args.data, args.pairs)
-        config = config_from_args(args)
-        registrar = Registrar(config)
-    except (FileNotFoundError, ValueError, CheckpointError) as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
+def _threads() -> dict[str, Optional[int]]:
+    return {"torch": torch.get_num_threads(), "torch_interop": torch.get_num_interop_threads(),
+            "numba": _numba_threads()}
 
-    for _ in range(args.warmup):
+
+def run(config: BenchConfig) -> BenchReport:
+    """Warm both methods up on the first pair, then time them pair by pair."""
+    pairs = make_pairs(config.data, config.pairs)
+    registrar = Registrar(config.registration)
+    for _ in range(config.warmup):
         registrar.register(pairs[0].source, pairs[0].target)
         icp(pairs[0].source, pairs[0].target)
-    times = {"cemnet": [], "icp": []}
-    rot_err = {"cemnet": [], "icp": []}
+    seconds: dict[str, list[float]] = {name: [] for name in METHODS}
+    rot_err: dict[str, list[float]] = {name: [] for name in METHODS}
     for pair in tqdm(pairs, desc="bench", unit="pair", file=sys.stderr):
         began = time.perf_counter()
         res = registrar.register(pair.source, pair.target)
-        times["cemnet"].append(time.perf_counter() - began)
+        seconds["cemnet"].append(time.perf_counter() - began)
         began = time.perf_counter()
         rotation, translation = icp(pair.source, pair.target)
-        times["icp"].append(time.perf_counter() - began)
+        seconds["icp"].append(time.perf_counter() - began)
         for name, (r, t) in (("cemnet", (res.rotation, res.translation)), ("icp", (rotation, translation))):
             rot_err[name].append(pair_metrics(r, t, pair.rotation, pair.translation).rot_err_deg)
+    return BenchReport(config, len(pairs[0].source), seconds, rot_err, _threads())
 
-    stats = {name: {**_stats(t), "median_rot_err_deg": float(np.median(rot_err[name]))} for name, t in times.items()}
-    ratio = stats["cemnet"]["median_ms"] / stats["icp"]["median_ms"]
-    threads = {"torch": torch.get_num_threads(), "torch_interop": torch.get_num_interop_threads(),
-               "numba": _numba_threads()}
-    cem = config.cem
-    source = f"data {args.data}" if args.data else "synthetic shape"
-    print(f"{len(pairs)} pairs of {len(pairs[0].source)} points ({source});"
-          f" CEM N={cem.n_candidates} T={cem.n_iters} M={cem.n_fused_iters}, prior={config.prior};"
-          f" threads: torch {threads['torch']} (interop {threads['torch_interop']}), numba {threads['numba']}")
-    print("| method | median ms | p90 ms | median rot err deg |\n|---|---:|---:|---:|")
-    for name, s in stats.items():
-        print(f"| {name} | {s['median_ms']:.1f} | {s['p90_ms']:.1f} | {s['median_rot_err_deg']:.3f} |")
-    print(f"CEMNet / ICP median latency ratio: {ratio:.1f}")
-    if args.json:
-        report = {"config": {"args": vars(args), "n_points": len(pairs[0].source), "python": platform.python_version(),
-                             "torch": torch.__version__, "threads": threads},
-                  "stats": stats, "ratio_median": ratio,
-                  "per_pair_ms": {name: [s * 1e3 for s in t] for name, t in times.items()}}
-        try:
-            path = Path(args.json)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(path, json.dumps(report, indent=1) + "\n")
-        except OSError as exc:
-            print(f"{PROG}: error: cannot write {args.json}: {exc}", file=sys.stderr)
-            return 2
-    return 0
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = build_parser().parse_args(argv)
+    with reported_errors(PROG, CheckpointError) as outcome:
+        config = BenchConfig(args.data, args.pairs, args.warmup, config_from_args(args))
+        emit(run(config), args.json)
+    return outcome.code
 
 
 if __name__ == "__main__":

@@ -7,18 +7,52 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import numpy as np
 
 from cemnet_ros.core import register
 from cemnet_ros.core.checkpoint import CheckpointError
+from cemnet_ros.core.config import RegistrationConfig
 from cemnet_ros.io.pointcloud_files import read_points
+from cemnet_ros.io.report import Report, emit
 from cemnet_ros.tools.cli_errors import reported_errors
 from cemnet_ros.tools.engine_args import add_engine_args, config_from_args
 
 PROG = "cemnet-register"
 AUTO_SCALE_RADIUS = 2.0  # clouds smaller than this are taken to be in network (unit-sphere) units
+
+
+@dataclass(frozen=True)
+class RegisterConfig:
+    """The two files, the ``--scale`` text (a number or 'auto') and the engine's configuration."""
+
+    source: str
+    target: str
+    scale: str = "auto"
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+
+
+@dataclass
+class RegisterReport(Report):
+    """T_target_source and sigma in the clouds' units, the fitness, sizes and the engine's runtime."""
+
+    T_target_source: np.ndarray
+    sigma: np.ndarray  # [euler z, y, x (rad), tx, ty, tz (cloud units)]
+    fitness: float
+    scale: float
+    n_source: int
+    n_target: int
+    runtime_s: float
+
+    def to_markdown(self) -> str:
+        with np.printoptions(precision=6, suppress=True, floatmode="fixed"):
+            return "\n".join(
+                [f"# source -> target transform (target ~= T @ source); scale {self.scale:g} units per network unit"]
+                + [" ".join(f"{v: .6f}" for v in row) for row in self.T_target_source]
+                + [f"fitness: {self.fitness:.4f}", f"sigma [z, y, x rad, tx, ty, tz units]: {self.sigma}",
+                   f"points: source {self.n_source}, target {self.n_target}; runtime {self.runtime_s * 1e3:.0f} ms"])
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -31,6 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
                              f"'auto' (default): 1.0 when both clouds have a radius (max distance to their "
                              f"centroid) below {AUTO_SCALE_RADIUS:g}, else the 90th percentile of the target's "
                              "distances to its centroid (e.g. for scans in metres); give a number to override")
+    parser.add_argument("--json", default=None, help="also write the result (transform, sigma, fitness) here")
     add_engine_args(parser)
     return parser
 
@@ -51,27 +86,23 @@ def resolve_scale(text: str, source: np.ndarray, target: np.ndarray) -> float:
     return scale
 
 
+def run(config: RegisterConfig) -> RegisterReport:
+    """Read both files, register them in network units, and scale the translation and sigma back."""
+    source, target = read_points(config.source), read_points(config.target)
+    scale = resolve_scale(config.scale, source, target)
+    result = register(source / scale, target / scale, config.registration)
+    transform, sigma = result.transform, result.sigma.copy()
+    transform[:3, 3] *= scale
+    sigma[3:] *= scale
+    return RegisterReport(transform, sigma, float(result.fitness), scale, len(source), len(target),
+                          float(result.runtime_s))
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     with reported_errors(PROG, CheckpointError) as outcome:
-        config = config_from_args(args)
-        source, target = read_points(args.source), read_points(args.target)
-        scale = resolve_scale(args.scale, source, target)
-        result = register(source / scale, target / scale, config)
-    if outcome.code:
-        return outcome.code
-    transform = result.transform
-    transform[:3, 3] *= scale
-    sigma = result.sigma.copy()
-    sigma[3:] *= scale
-    with np.printoptions(precision=6, suppress=True, floatmode="fixed"):
-        print(f"# source -> target transform (target ~= T @ source); scale {scale:g} units per network unit")
-        for row in transform:
-            print(" ".join(f"{v: .6f}" for v in row))
-        print(f"fitness: {result.fitness:.4f}")
-        print(f"sigma [z, y, x rad, tx, ty, tz units]: {sigma}")
-        print(f"points: source {len(source)}, target {len(target)}; runtime {result.runtime_s * 1e3:.0f} ms")
-    return 0
+        emit(run(RegisterConfig(args.source, args.target, args.scale, config_from_args(args))), args.json)
+    return outcome.code
 
 
 if __name__ == "__main__":

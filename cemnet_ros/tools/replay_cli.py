@@ -19,14 +19,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
 import numpy as np
 import yaml
 
-from cemnet_ros.io.atomic import atomic_write_text
+from cemnet_ros.io.atomic import write_report
+from cemnet_ros.io.report import Report
 from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.replay.bag_io import BagError, BagReader
 from cemnet_ros.replay.report import evaluate, format_report, skipped_line, speed
@@ -34,6 +35,9 @@ from cemnet_ros.replay.runner import ODOM_TOPIC, ReplayResult, copied_topics, ou
 from cemnet_ros.replay.trajectory import write_tum
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.schema import add_arguments, build, flatten_mapping, parameters, parsed_overrides
+from cemnet_ros.tools.cli_errors import reported_errors
+
+PROG = "cemnet-replay"
 
 PIPELINE = parameters(AlignerConfig(), exclude=DERIVED)  # the flags and params-file names it accepts
 # The node's own parameters that shape its outputs offline (frames, extrinsic, covariances, TF, cloud); the
@@ -74,7 +78,7 @@ def load_node_params(path: Optional[Path]) -> dict[str, Any]:
 
 # ---------------------------------------------------------------------------------------------- CLI
 def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="cemnet-replay", description=__doc__.splitlines()[0],
+    p = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("bag", type=Path, help="rosbag2 directory or .mcap/.db3 file")
     p.add_argument("--out", type=Path, default=None, help="output directory (default: results/replay/<bag name>)")
@@ -95,96 +99,136 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     return args
 
 
-def configure(args: argparse.Namespace) -> tuple[AlignerConfig, NodeConfig]:
-    """The pipeline and node configurations: --config, then the flags. Raises ValueError/TypeError/OSError."""
-    params = {**load_params(args.config), **parsed_overrides(args, PIPELINE)}
-    config = build(AlignerConfig(), params, exclude=DERIVED)
-    node = build(NodeConfig(), {**load_node_params(args.config), **parsed_overrides(args, NODE)})
-    return config, node
+@dataclass(frozen=True)
+class ReplayConfig:
+    """One replay: the bag, where its outputs go, the topics (None: found in the bag) and the configurations."""
+
+    bag: Path
+    out: Path
+    pipeline: AlignerConfig
+    node: NodeConfig
+    topic: Optional[str] = None
+    gt_topic: Optional[str] = None
+    limit: Optional[int] = None
+    plot: bool = True
+    progress: bool = True
 
 
-def write_outputs(args: argparse.Namespace, out: Path, result: ReplayResult, acc: Optional[dict],
+@dataclass
+class ReplayReport(Report):
+    """summary.json's content (None: no scan gave a pose, ``skipped`` says why) and where the outputs are."""
+
+    bag: str
+    out: Path
+    summary: Optional[dict[str, Any]]
+    skipped: str = ""
+
+    def to_markdown(self) -> str:
+        if self.summary is None:
+            return f"no scan could be processed ({self.skipped})"
+        lines = [format_report(self.bag, self.summary),
+                 f"outputs: {self.out}/  (replay.mcap: {', '.join(self.summary['replay_topics'])})"]
+        if self.summary["gt_topic"] is not None:
+            lines.append(f"score it with evo: evo_ape bag2 {self.out / 'replay.mcap'} {self.summary['gt_topic']} "
+                         f"{ODOM_TOPIC} -a")
+        return "\n".join(lines)
+
+    def to_json(self) -> str:
+        return json.dumps(self.summary, indent=2, default=float) + "\n"
+
+
+def configure(args: argparse.Namespace) -> ReplayConfig:
+    """The replay's configuration: --config, then the flags. A bad value is a ValueError "bad configuration: ..."."""
+    try:
+        params = {**load_params(args.config), **parsed_overrides(args, PIPELINE)}
+        pipeline = build(AlignerConfig(), params, exclude=DERIVED)
+        node = build(NodeConfig(), {**load_node_params(args.config), **parsed_overrides(args, NODE)})
+    except (OSError, ValueError, TypeError, yaml.YAMLError) as err:
+        raise ValueError(f"bad configuration: {err}") from err
+    out = args.out or Path("results") / "replay" / args.bag.name.split(".")[0]
+    return ReplayConfig(args.bag, out, pipeline, node, args.topic, args.gt_topic, args.limit, not args.no_plot,
+                        not args.quiet)
+
+
+def write_outputs(config: ReplayConfig, result: ReplayResult, acc: Optional[dict],
                   gt: tuple[np.ndarray, np.ndarray]) -> dict[str, str]:
-    """trajectory_tum.txt, ground_truth_tum.txt (with ground truth) and replay.png (unless --no-plot)."""
+    """trajectory_tum.txt, ground_truth_tum.txt (with ground truth) and replay.png (with ``plot``)."""
+    out = config.out
     files = {"bag": str(out / "replay.mcap"), "tum": str(write_tum(out / "trajectory_tum.txt",
                                                                   result.stamps_ns, result.poses))}
     if len(gt[0]):
         files["ground_truth_tum"] = str(write_tum(out / "ground_truth_tum.txt", *gt))
-    if not args.no_plot:
+    if config.plot:
         from cemnet_ros.replay.plot import save_replay_plot
 
         if acc and "ate" in acc:
             est = np.einsum("ij,njk->nik", acc["_aligned"], acc["_est"])
-            save_replay_plot(out / "replay.png", est, acc["_gt"], acc["_rpe"], title=args.bag.name)
+            save_replay_plot(out / "replay.png", est, acc["_gt"], acc["_rpe"], title=config.bag.name)
         else:
-            save_replay_plot(out / "replay.png", np.stack(result.poses), title=args.bag.name)
+            save_replay_plot(out / "replay.png", np.stack(result.poses), title=config.bag.name)
         files["plot"] = str(out / "replay.png")
     return files
 
 
-def build_summary(args: argparse.Namespace, run: dict[str, Any], result: ReplayResult, acc: Optional[dict],
+def build_summary(config: ReplayConfig, facts: dict[str, Any], result: ReplayResult, acc: Optional[dict],
                   files: dict[str, str]) -> dict:
-    """summary.json's content; ``run``: info, gt_frame, copies, config, node, scale of the replay."""
-    info, node = run["info"], run["node"]
+    """summary.json's content; ``facts``: info, gt_frame, copies and scale of the replay."""
+    info, node = facts["info"], config.node
     return {
-        "bag": str(args.bag), "cloud_topic": info.cloud_topic, "gt_topic": info.gt_topic, "gt_frame": run["gt_frame"],
+        "bag": str(config.bag), "cloud_topic": info.cloud_topic, "gt_topic": info.gt_topic,
+        "gt_frame": facts["gt_frame"],
         "frames": {"odom_frame": node.odom_frame, "base_frame": node.base_frame,
                    "base_to_sensor": list(node.base_to_sensor)},
-        "replay_topics": {**output_topics(node), **{t: info.topics[t] for t in run["copies"]}},
-        "messages": result.n_messages, "scans": len(result.steps), "scale_m_per_unit": run["scale"],
+        "replay_topics": {**output_topics(node), **{t: info.topics[t] for t in facts["copies"]}},
+        "messages": result.n_messages, "scans": len(result.steps), "scale_m_per_unit": facts["scale"],
         "accuracy": None if acc is None else {k: v for k, v in acc.items() if not k.startswith("_")},
         "speed": speed(result), "skipped_count": len(result.skipped),
         "skipped": [s.as_dict() for s in result.skipped], "rejected": result.rejected,
         "flagged": [{"index": s["index"], "reason": s["reason"]} for s in result.steps
                     if not s["accepted"] or s["reason"]],
-        "steps": result.steps, "config": asdict(run["config"]), "node_config": {k: getattr(node, k) for k in NODE},
+        "steps": result.steps, "config": asdict(config.pipeline), "node_config": {k: getattr(node, k) for k in NODE},
         "outputs": files,
     }
 
 
-def replay(args: argparse.Namespace, config: AlignerConfig, node: NodeConfig, out: Path
-           ) -> tuple[ReplayResult, dict[str, Any], tuple[np.ndarray, np.ndarray]]:
+def replay(config: ReplayConfig) -> tuple[ReplayResult, dict[str, Any], tuple[np.ndarray, np.ndarray]]:
     """Run the bag through a fresh aligner into out/replay.mcap: (result, run facts, ground truth). BagError."""
     from cemnet_ros.pipeline.aligner import ScanAligner
 
-    with BagReader(args.bag, topic=args.topic, gt_topic=args.gt_topic) as reader:
-        copies = copied_topics(reader, node)
+    with BagReader(config.bag, topic=config.topic, gt_topic=config.gt_topic) as reader:
+        copies = copied_topics(reader, config.node)
         gt_stamps, gt_poses, gt_frame = reader.ground_truth()
-        aligner = ScanAligner(config)
-        out.mkdir(parents=True, exist_ok=True)
-        result = run_replay(reader, aligner, out / "replay.mcap", args.limit, progress=not args.quiet, node=node)
-        run = {"info": reader.info, "gt_frame": gt_frame, "copies": copies, "config": config, "node": node,
-               "scale": float(aligner.scale or float("nan"))}
-    return result, run, (gt_stamps, gt_poses)
+        aligner = ScanAligner(config.pipeline)
+        config.out.mkdir(parents=True, exist_ok=True)
+        result = run_replay(reader, aligner, config.out / "replay.mcap", config.limit, progress=config.progress,
+                            node=config.node)
+        facts = {"info": reader.info, "gt_frame": gt_frame, "copies": copies,
+                 "scale": float(aligner.scale or float("nan"))}
+    return result, facts, (gt_stamps, gt_poses)
+
+
+def run(config: ReplayConfig) -> ReplayReport:
+    """Replay the bag, score it against its ground truth and write the trajectory files and the plot."""
+    result, facts, gt = replay(config)
+    if not result.poses:
+        return ReplayReport(str(config.bag), config.out, None,
+                            skipped_line([s.as_dict() for s in result.skipped], result.n_messages))
+    acc = evaluate(result, *gt)
+    files = write_outputs(config, result, acc, gt)
+    files["summary"] = str(config.out / "summary.json")
+    return ReplayReport(str(config.bag), config.out, build_summary(config, facts, result, acc, files))
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(argv)
-    try:
-        config, node = configure(args)
-    except (OSError, ValueError, TypeError, yaml.YAMLError) as err:
-        print(f"cemnet-replay: bad configuration: {err}", file=sys.stderr)
-        return 2
-    out = args.out or Path("results") / "replay" / args.bag.name.split(".")[0]
-    try:
-        result, run, gt = replay(args, config, node, out)
-    except BagError as err:
-        print(f"cemnet-replay: {err}", file=sys.stderr)
-        return 2
-    if not result.poses:
-        summary = skipped_line([s.as_dict() for s in result.skipped], result.n_messages)
-        print(f"cemnet-replay: no scan could be processed ({summary})", file=sys.stderr)
-        return 1
-    acc = evaluate(result, *gt)
-    files = write_outputs(args, out, result, acc, gt)
-    summary = build_summary(args, run, result, acc, files)
-    files["summary"] = str(out / "summary.json")
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float) + "\n")
-    print(format_report(str(args.bag), summary))
-    print(f"outputs: {out}/  (replay.mcap: {', '.join(summary['replay_topics'])})")
-    if run["info"].gt_topic is not None:
-        print(f"score it with evo: evo_ape bag2 {out / 'replay.mcap'} {run['info'].gt_topic} {ODOM_TOPIC} -a")
-    return 0
+    with reported_errors(PROG, BagError) as outcome:
+        report = run(configure(args))
+        if report.summary is None:
+            print(f"{PROG}: {report.to_markdown()}", file=sys.stderr)
+            return 1
+        write_report(report.out / "summary.json", report.to_json())
+        print(report.to_markdown())
+    return outcome.code
 
 
 if __name__ == "__main__":

@@ -1,17 +1,24 @@
-"""A synthetic street-like scene and rigid motions for the pipeline and node tests (metres)."""
+"""A street-like point set (sampled surfaces, not ray-cast) and rigid motions, for the pipeline and node tests
+(metres): ground, two walls and boxes, so that every pose component is observable."""
+from __future__ import annotations
+
+from typing import Sequence
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 
-def make_transform(yaw=0.0, t=(0.0, 0.0, 0.0), roll=0.0, pitch=0.0):
+def make_transform(yaw: float = 0.0, t: Sequence[float] = (0.0, 0.0, 0.0), roll: float = 0.0,
+                   pitch: float = 0.0) -> np.ndarray:
+    """A 4x4 rigid transform from extrinsic x-y-z angles (rad) and a translation."""
     out = np.eye(4)
     out[:3, :3] = Rotation.from_euler("xyz", [roll, pitch, yaw]).as_matrix()
     out[:3, 3] = t
     return out
 
 
-def make_world(seed=1, n=20000):
-    """Ground, two walls and a few boxes: structure in every direction."""
+def make_world(seed: int = 1, n: int = 20000) -> np.ndarray:
+    """(~n, 3) points: ground at z = -1.5, two walls and a few boxes: structure in every direction."""
     rng = np.random.default_rng(seed)
     ground = np.c_[rng.uniform(-20, 20, (n // 2, 2)), np.full(n // 2, -1.5)]
     wall_a = np.c_[rng.uniform(-20, 20, n // 8), np.full(n // 8, 6.0), rng.uniform(-1.5, 3, n // 8)]

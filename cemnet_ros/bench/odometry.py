@@ -1,0 +1,101 @@
+"""The methods under test, each a fresh odometry per pair / sequence: ``process(points, stamp_ns) -> Output``.
+
+``ScanAligner`` with default parameters; KISS-ICP with its default config (max_range of the sensor, voxel =
+max_range / 100); small_gicp GICP scan-to-scan from the identity. The peers have no failure flag: all their
+steps count as accepted.
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from cemnet_ros.io.console import log
+
+METHODS = ("cemnet", "kiss-icp", "gicp")
+
+
+@dataclass
+class Output:
+    """One scan's result: pose T_odom_sensor (odom = first scan), flag, reason, covariance (None: not given)."""
+
+    pose: np.ndarray
+    accepted: bool = True
+    reason: str = ""
+    covariance: Optional[np.ndarray] = None
+
+
+class CemnetOdometry:
+    """The pipeline under test, through its public interface only."""
+
+    def __init__(self, max_range: float) -> None:
+        from cemnet_ros.pipeline.aligner import AlignerConfig, ScanAligner
+
+        self._aligner = ScanAligner(AlignerConfig())
+
+    def process(self, points: np.ndarray, stamp_ns: int) -> Output:
+        step = self._aligner.process(points, stamp_ns)
+        return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason), np.asarray(step.covariance))
+
+
+class KissOdometry:
+    """KISS-ICP with its default config; ``max_range`` set for the sensor (voxel = max_range / 100)."""
+
+    def __init__(self, max_range: float) -> None:
+        from kiss_icp.config import KISSConfig
+        from kiss_icp.kiss_icp import KissICP
+
+        config = KISSConfig()
+        config.data.max_range = max_range
+        config.mapping.voxel_size = max_range / 100.0
+        self._kiss = KissICP(config)
+
+    def process(self, points: np.ndarray, stamp_ns: int) -> Output:
+        self._kiss.register_frame(points, np.empty(0))  # no per-point timestamps: no deskewing
+        return Output(self._kiss.last_pose.copy())
+
+
+class GicpOdometry:
+    """small_gicp GICP scan-to-scan from the identity (0.25 m voxels, 1 m correspondences, 2 threads)."""
+
+    voxel, max_distance, threads = 0.25, 1.0, 2
+
+    def __init__(self, max_range: float) -> None:
+        import small_gicp
+
+        self._gicp = small_gicp
+        self._pose = np.eye(4)
+        self._previous = None
+
+    def process(self, points: np.ndarray, stamp_ns: int) -> Output:
+        cloud, tree = self._gicp.preprocess_points(points, self.voxel, num_threads=self.threads)
+        if self._previous is not None:
+            target, target_tree = self._previous
+            result = self._gicp.align(target, cloud, target_tree, registration_type="GICP",
+                                      max_correspondence_distance=self.max_distance, num_threads=self.threads)
+            self._pose = self._pose @ np.asarray(result.T_target_source)
+        self._previous = (cloud, tree)
+        return Output(self._pose.copy())
+
+
+FACTORIES: dict[str, Callable] = {"cemnet": CemnetOdometry, "kiss-icp": KissOdometry, "gicp": GicpOdometry}
+PEER_MODULES = {"kiss-icp": "kiss_icp.kiss_icp", "gicp": "small_gicp"}
+
+
+def available_methods(wanted: list[str]) -> dict[str, Callable]:
+    """The wanted methods, less the peers that do not import (reported on stderr).
+
+    The pipeline under test is always kept: if it cannot even be built, every step counts as failed.
+    """
+    out = {}
+    for name in wanted:
+        if name in PEER_MODULES:
+            try:
+                importlib.import_module(PEER_MODULES[name])
+            except ImportError as exc:
+                log(f"{name}: not importable ({exc}); left out (pip install -e .[bench])")
+                continue
+        out[name] = FACTORIES[name]
+    return out
