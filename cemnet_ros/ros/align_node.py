@@ -5,7 +5,7 @@ subscriptions take the messages' CDR bytes and only queue them (:mod:`.scans`, p
 :class:`~cemnet_ros.pipeline.pairing.PairMatcher`); a background thread loads the engine (so that the
 subscriptions exist at once and early scans wait in the queue); one worker thread deserializes and decodes,
 then registers through :class:`~cemnet_ros.pipeline.aligner_session.AlignerSession` and publishes
-(:mod:`.outputs`). Every input gets a verdict (:mod:`~cemnet_ros.pipeline.verdicts`); a full queue drops its
+(:mod:`.outputs`). Every input gets a verdict (:mod:`~cemnet_ros.pipeline.scan_status`); a full queue drops its
 oldest message before it is deserialized, counted and reported. Services: :mod:`.services`.
 
 Modes: ``sequential`` registers each ``input_topic`` scan against a local map (odometry of ``base_frame`` in
@@ -32,7 +32,7 @@ from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy, transfor
 from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.node_status import NodeStatus
 from cemnet_ros.pipeline.pairing import PairMatcher
-from cemnet_ros.pipeline.verdicts import Outcome, Verdicts
+from cemnet_ros.pipeline.scan_status import Outcome, ScanStatus
 from cemnet_ros.pipeline.worker import BoundedWorker
 from cemnet_ros.ros.outputs import NodeOutputs
 from cemnet_ros.ros.parameters import ConfigError, declare_and_read
@@ -62,7 +62,7 @@ class AlignNode(Node):
         self._session = AlignerSession(pipeline_config, cfg, BaseFrame(pose_from_xyz_rpy(cfg.base_to_sensor)))
         self._extrinsic_from_tf = tf2_ros is not None
         self._status = NodeStatus(cfg.input_timeout)
-        self._verdicts = Verdicts(self._status)
+        self._scan_status = ScanStatus(self._status)
         self._target: Optional[tuple[Incoming, Scan]] = None  # pair mode: the last target, decoded once
         self._outputs = NodeOutputs(self, cfg)
         if self._extrinsic_from_tf:
@@ -107,7 +107,7 @@ class AlignNode(Node):
         try:
             return Incoming.of(payload, topic_kind)
         except ScanRejected as exc:
-            self._report(self._verdicts.rejected(exc.kind, f"{topic_kind} cloud rejected: {exc}", None))
+            self._report(self._scan_status.rejected(exc.kind, f"{topic_kind} cloud rejected: {exc}", None))
             return None
 
     def _on_scan(self, payload: bytes) -> None:
@@ -127,7 +127,7 @@ class AlignNode(Node):
 
     def _queue_pairs(self, ready: list, unpaired: list) -> None:
         for source in unpaired:
-            self._report(self._verdicts.unpaired(source.stamp_ns, self._pairs.tolerance_ns))
+            self._report(self._scan_status.unpaired(source.stamp_ns, self._pairs.tolerance_ns))
         for pair in ready:
             self._submit(pair)
 
@@ -143,16 +143,16 @@ class AlignNode(Node):
         try:
             result, source, frame = self._sequential(item) if isinstance(item, Incoming) else self._pair(*item)
         except ScanRejected as exc:
-            self._report(self._verdicts.rejected(exc.kind, str(exc), _stamp_of(item)))
+            self._report(self._scan_status.rejected(exc.kind, str(exc), _stamp_of(item)))
             return
-        self._report(self._verdicts.step(result.step))
+        self._report(self._scan_status.step(result.step))
         self._outputs.step(result, source, frame)
 
     def _decode(self, item: Incoming) -> Scan:
         scan = decode(item, self._session.config.preprocess.deskew,
                       lambda payload: deserialize_message(payload, PointCloud2))
         self._status.decoded()
-        self._log_warnings(self._verdicts.admitted(scan.warnings))
+        self._log_warnings(self._scan_status.admitted(scan.warnings))
         return scan
 
     def _sequential(self, item: Incoming) -> tuple[StepResult, Scan, str]:
@@ -200,7 +200,7 @@ class AlignNode(Node):
     def _on_worker_error(self, item: Any, exc: BaseException) -> None:
         """A scan whose processing raised: counted, logged, and an ERROR verdict (no scan goes unreported)."""
         if self.context.ok():  # else shutting down: the publishers are gone, nothing failed
-            self._report(self._verdicts.error(exc, _stamp_of(item)))
+            self._report(self._scan_status.error(exc, _stamp_of(item)))
 
     # -- reporting (any thread) ------------------------------------------------------------------------------
     def _report(self, outcome: Outcome) -> None:
@@ -211,7 +211,7 @@ class AlignNode(Node):
             self._outputs.scan_status(outcome.verdict)
 
     def _warn(self, kind: str, message: str) -> None:
-        self._log_warnings(self._verdicts.throttled(kind, message))
+        self._log_warnings(self._scan_status.throttled(kind, message))
 
     def _log_warnings(self, lines: list[str]) -> None:
         for line in lines:

@@ -13,7 +13,7 @@ from sensor_msgs.msg import PointCloud2, PointField
 
 from cemnet_ros.pipeline.aligner_session import StepResult
 from cemnet_ros.pipeline.odometry_output import aligned_points
-from cemnet_ros.pipeline.verdicts import Verdict
+from cemnet_ros.pipeline.scan_status import ScanVerdict
 from cemnet_ros.pointcloud2 import make_pointcloud2, transformed_cloud
 from cemnet_ros.ros import messages
 from cemnet_ros.ros.node_config import NodeConfig
@@ -67,8 +67,8 @@ class NodeOutputs:
         return make_pointcloud2(PointCloud2, PointField, aligned_points(source.points, T_odom_sensor, voxel), frame,
                                 source.msg.header.stamp)
 
-    def scan_status(self, verdict: Verdict) -> None:
-        """The verdict on one input message (pipeline/verdicts.py); name = its stamp in ns ("" when unreadable)."""
+    def scan_status(self, verdict: ScanVerdict) -> None:
+        """The verdict on one input message (pipeline/scan_status.py); name = its stamp in ns ("" when unreadable)."""
         name = "" if verdict.stamp_ns is None else str(verdict.stamp_ns)
         self._scan_status.publish(_status(name, verdict.level, verdict.message, verdict.values))
 

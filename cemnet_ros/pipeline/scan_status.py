@@ -20,7 +20,7 @@ WARN_PERIOD_S = 5.0  # at most one log warning per kind this often
 
 
 @dataclass
-class Verdict:
+class ScanVerdict:
     """One input message's ``~/scan_status``."""
 
     stamp_ns: Optional[int]  # None: the stamp could not be read
@@ -33,12 +33,12 @@ class Verdict:
 class Outcome:
     """What the node publishes and logs about one event."""
 
-    verdict: Optional[Verdict] = None
+    verdict: Optional[ScanVerdict] = None
     warnings: list[str] = field(default_factory=list)  # log warnings due now (throttled)
     error: Optional[str] = None  # a log error: the first of its exception type, with its traceback
 
 
-class Verdicts:
+class ScanStatus:
     """Counts what happens to each input in a NodeStatus and says what to publish and log (thread-safe)."""
 
     def __init__(self, status: NodeStatus, period_s: float = WARN_PERIOD_S,
@@ -62,7 +62,7 @@ class Verdicts:
     def rejected(self, kind: str, message: str, stamp_ns: Optional[int]) -> Outcome:
         """An input refused before or by the aligner (``kind``: the fault, e.g. "cdr", "stamp", "unpaired")."""
         count = self.status.reject(kind)
-        return Outcome(Verdict(stamp_ns, ERROR, message, {"rejected": kind}),
+        return Outcome(ScanVerdict(stamp_ns, ERROR, message, {"rejected": kind}),
                        self.throttled(kind, f"[{kind}] {message} ({count} rejected so far)"))
 
     def unpaired(self, source_stamp_ns: int, tolerance_ns: int) -> Outcome:
@@ -86,7 +86,7 @@ class Verdicts:
             lines += self.throttled("flagged", f"step at {step.stamp_ns * 1e-9:.3f} s flagged: {step.reason}")
         values = {"fitness": round(step.fitness, 4), "recovered": step.recovered,
                   "warnings": "; ".join(f"[{kind}] {text}" for kind, text in step.warnings)}
-        return Outcome(Verdict(step.stamp_ns, OK if step.accepted else WARN, step.reason or "ok", values), lines)
+        return Outcome(ScanVerdict(step.stamp_ns, OK if step.accepted else WARN, step.reason or "ok", values), lines)
 
     def error(self, exc: BaseException, stamp_ns: Optional[int]) -> Outcome:
         """A scan whose processing raised (a bug to report): an ERROR verdict, so that no scan goes unreported."""
@@ -96,4 +96,4 @@ class Verdicts:
             first = name not in self._error_types
             self._error_types.add(name)
         error = message + "\n" + "".join(traceback.format_exception(exc)) if first else None
-        return Outcome(Verdict(stamp_ns, ERROR, message, {"error": name}), self.throttled("error", message), error)
+        return Outcome(ScanVerdict(stamp_ns, ERROR, message, {"error": name}), self.throttled("error", message), error)
