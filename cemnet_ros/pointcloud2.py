@@ -15,6 +15,7 @@ from typing import Any, List, Optional, Tuple
 
 import numpy as np
 
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.deskew import TIME_FIELDS, TimeFieldError, normalize_point_times
 
 # sensor_msgs/PointField datatype constants.
@@ -85,6 +86,16 @@ def decode_xyz(msg: Any) -> Tuple[np.ndarray, CloudReport]:
 
 def _xyz_rows(msg: Any) -> Tuple[np.ndarray, np.ndarray]:
     """Every row's x, y, z (finite or not) as (height * width, 3) float64, and the data as uint8; validated."""
+    buf = as_bytes(msg.data)
+    views = _xyz_views(msg, buf)
+    points = np.empty((int(msg.height) * int(msg.width), 3), dtype=np.float64)
+    for axis, view in enumerate(views):
+        points[:, axis] = view.reshape(-1)
+    return points, buf
+
+
+def _xyz_views(msg: Any, buf: np.ndarray) -> List[np.ndarray]:
+    """(height, width) views of x, y and z into ``buf`` (the message's data as uint8), the layout validated."""
     height, width = int(msg.height), int(msg.width)
     point_step, row_step = int(msg.point_step), int(msg.row_step)
     if height <= 0 or width <= 0:
@@ -109,15 +120,11 @@ def _xyz_rows(msg: Any) -> Tuple[np.ndarray, np.ndarray]:
     if row_step < width * point_step:
         raise CloudError("layout",
                          f"row_step {row_step} is smaller than width * point_step = {width * point_step}")
-    buf = as_bytes(msg.data)
     if len(buf) < row_step * height:
         raise CloudError("truncated", f"truncated cloud: {len(buf)} bytes of data, expected row_step * height "
                                       f"= {row_step * height}")
-    points = np.empty((height * width, 3), dtype=np.float64)
-    for axis, (offset, dtype) in enumerate(layout):
-        view = np.ndarray((height, width), dtype=dtype, buffer=buf, offset=offset, strides=(row_step, point_step))
-        points[:, axis] = view.reshape(-1)
-    return points, buf
+    return [np.ndarray((height, width), dtype=dtype, buffer=buf, offset=offset, strides=(row_step, point_step))
+            for offset, dtype in layout]
 
 
 def decode_point_times(msg: Any, stamp_ns: Optional[int] = None) -> Optional[np.ndarray]:
@@ -202,11 +209,31 @@ def make_pointcloud2(msg_cls: Any, field_cls: Any, points: np.ndarray, frame_id:
     the ``std_msgs/msg/Header`` class, because those have no default constructors).
     """
     enc = encode_xyz(points)
-    is_dataclass = hasattr(msg_cls, "__dataclass_fields__")
     fields = [field_cls(name=n, offset=o, datatype=d, count=c) for n, o, d, c in enc.fields]
-    data = np.frombuffer(enc.data, dtype=np.uint8) if is_dataclass else enc.data
     body = dict(height=1, width=enc.width, fields=fields, is_bigendian=False, point_step=enc.point_step,
-                row_step=enc.row_step, data=data, is_dense=True)
+                row_step=enc.row_step, is_dense=True)
+    return _message(msg_cls, body, np.frombuffer(enc.data, dtype=np.uint8), frame_id, stamp, header_cls)
+
+
+def transformed_cloud(msg_cls: Any, cloud: Any, T_frame_cloud: np.ndarray, frame_id: str,
+                      header_cls: Any = None) -> Any:
+    """A copy of ``cloud`` with x, y, z moved by ``T_frame_cloud`` into ``frame_id``, every other field kept and
+    the stamp too (float32/64 coordinates; classes as in :func:`make_pointcloud2`)."""
+    data = as_bytes(cloud.data).copy()
+    views = _xyz_views(cloud, data)
+    moved = apply_transform(T_frame_cloud, np.stack([v.reshape(-1).astype(np.float64) for v in views], axis=1))
+    for axis, view in enumerate(views):
+        view[...] = moved[:, axis].reshape(view.shape)
+    body = dict(height=cloud.height, width=cloud.width, fields=list(cloud.fields), is_bigendian=cloud.is_bigendian,
+                point_step=cloud.point_step, row_step=cloud.row_step, is_dense=cloud.is_dense)
+    return _message(msg_cls, body, data, frame_id, cloud.header.stamp, header_cls)
+
+
+def _message(msg_cls: Any, body: dict, data: np.ndarray, frame_id: str, stamp: Any, header_cls: Any) -> Any:
+    """A PointCloud2 of ``msg_cls``: rclpy's takes its data as bytes, rosbags' as a uint8 array and its header
+    in the constructor."""
+    is_dataclass = hasattr(msg_cls, "__dataclass_fields__")
+    body["data"] = data if is_dataclass else data.tobytes()
     if header_cls is not None:
         return msg_cls(header=header_cls(stamp=stamp, frame_id=frame_id), **body)
     msg = msg_cls(**body)

@@ -181,7 +181,7 @@ def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_n
         assert node.get_fully_qualified_name() == "/robot1/lidar_odom"
         assert node.get_parameter("registration.cem.n_iters").value == 7
         assert node.get_parameter("mode").value == "sequential"
-        cem = node._pipeline_config.registration.cem  # the parameters reach the pipeline's config
+        cem = node._session.config.registration.cem  # the parameters reach the pipeline's config
         assert (cem.n_iters, cem.n_candidates) == (7, params["registration.cem.n_candidates"])
         assert node._cfg.base_frame == "robot1/base"
         result = node.set_parameters([Parameter("registration.n_points", value=100)])[0]  # read-only
@@ -271,7 +271,7 @@ def test_bad_inputs_are_counted_warned_and_do_not_stop_valid_scans(harness_facto
 def test_a_scan_whose_processing_raises_gets_an_error_verdict_and_one_traceback(harness_factory):
     h = harness_factory()
     h.send(scan_msg(0), timeout=FIRST_TIMEOUT)
-    real = h.node._aligner.process
+    real = h.node._session._aligner.process
     calls = []
 
     def fail_once(*args, **kwargs):
@@ -280,7 +280,7 @@ def test_a_scan_whose_processing_raises_gets_an_error_verdict_and_one_traceback(
             raise RuntimeError("injected fault")
         return real(*args, **kwargs)
 
-    h.node._aligner.process = fail_once
+    h.node._session._aligner.process = fail_once
     count = len(h.statuses)
     h.pubs["points"].publish(scan_msg(1, pose=POSES[1]))
     assert wait_for(lambda: len(h.statuses) > count, 10)

@@ -6,7 +6,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from cemnet_ros.pointcloud2 import FLOAT32, FLOAT64, INT16, UINT8, CloudError, decode_xyz, encode_xyz, make_pointcloud2
+from cemnet_ros.pointcloud2 import (
+    FLOAT32,
+    FLOAT64,
+    INT16,
+    UINT8,
+    CloudError,
+    decode_xyz,
+    encode_xyz,
+    make_pointcloud2,
+    transformed_cloud,
+)
 
 
 def field(name, offset, datatype, count=1):
@@ -136,3 +146,41 @@ def test_make_pointcloud2_rosbags_round_trip():
     back = store.deserialize_cdr(raw, "sensor_msgs/msg/PointCloud2")
     assert back.header.frame_id == "cam"
     np.testing.assert_allclose(decode_xyz(back)[0], PTS, rtol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["rclpy", "rosbags"])
+def test_transformed_cloud_moves_xyz_and_keeps_every_other_byte(kind):
+    from cemnet_ros.core.geometry import apply_transform
+    from cemnet_ros.pipeline.extrinsic import pose_from_xyz_rpy
+
+    # Organised, big-endian float64, an intensity field between the coordinates' and 5 bytes of row padding.
+    extra = (field("intensity", 24, FLOAT32),)
+    source = cloud(PTS, dtype=">f8", offsets=(0, 8, 16), point_step=32, row_pad=5, height=2, extra=extra)
+    data = bytearray(source.data)
+    for i in range(12):  # an intensity per point, which must come through untouched
+        r, c = divmod(i, 6)
+        data[r * source.row_step + c * 32 + 24:][:4] = np.array(i + 0.5, dtype=">f4").tobytes()
+    source.data = bytes(data)
+    T = pose_from_xyz_rpy((1.0, -2.0, 0.5, 0.1, 0.2, -0.3))
+    if kind == "rclpy":
+        from builtin_interfaces.msg import Time
+        from sensor_msgs.msg import PointCloud2
+
+        source.header = SimpleNamespace(stamp=Time(sec=4, nanosec=9), frame_id="lidar")
+        moved = transformed_cloud(PointCloud2, source, T, "odom")
+    else:
+        from cemnet_ros.replay.bag_types import rosbags_type
+
+        source.header = SimpleNamespace(stamp=rosbags_type("builtin_interfaces/msg/Time")(sec=4, nanosec=9),
+                                        frame_id="lidar")
+        moved = transformed_cloud(rosbags_type("sensor_msgs/msg/PointCloud2"), source, T, "odom",
+                                  header_cls=rosbags_type("std_msgs/msg/Header"))
+    assert moved.header.frame_id == "odom" and moved.header.stamp.nanosec == 9
+    assert (moved.height, moved.width, moved.row_step, moved.is_bigendian) == (2, 6, source.row_step, True)
+    np.testing.assert_allclose(decode_xyz(moved)[0], apply_transform(T, PTS), rtol=1e-12)
+    out, before = np.frombuffer(bytes(moved.data), dtype=np.uint8), np.frombuffer(source.data, dtype=np.uint8)
+    coordinate_bytes = np.zeros(len(before), dtype=bool)
+    for r in range(2):
+        for c in range(6):
+            coordinate_bytes[r * source.row_step + c * 32:][:24] = True
+    np.testing.assert_array_equal(out[~coordinate_bytes], before[~coordinate_bytes])

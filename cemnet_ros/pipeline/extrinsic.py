@@ -26,13 +26,22 @@ def pose_from_xyz_rpy(values: tuple | np.ndarray) -> np.ndarray:
 
 def pose_msg_to_matrix(pose) -> np.ndarray:
     """A geometry_msgs/Pose (rclpy or rosbags) -> 4x4; the quaternion normalised, a zero one refused (ValueError)."""
-    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w], dtype=np.float64)
+    return _matrix(pose.position, pose.orientation)
+
+
+def transform_msg_to_matrix(transform) -> np.ndarray:
+    """A geometry_msgs/Transform (e.g. of a TF lookup) -> 4x4, as :func:`pose_msg_to_matrix`."""
+    return _matrix(transform.translation, transform.rotation)
+
+
+def _matrix(translation, rotation) -> np.ndarray:
+    q = np.array([rotation.x, rotation.y, rotation.z, rotation.w], dtype=np.float64)
     norm = np.linalg.norm(q)
     if not np.isfinite(norm) or norm < 1e-9:
         raise ValueError(f"invalid pose quaternion {q.tolist()}")
     out = np.eye(4)
     out[:3, :3] = Rotation.from_quat(q / norm).as_matrix()
-    out[:3, 3] = [pose.position.x, pose.position.y, pose.position.z]
+    out[:3, 3] = [translation.x, translation.y, translation.z]
     return out
 
 

@@ -11,7 +11,8 @@ own message types with the result, so a replayed bag carries exactly what the no
 - ``pose_covariance``: 6x6, ROS order (x, y, z, roll, pitch, yaw), about the base in odom axes: the polish's
   (``covariance_mode`` registration) or the fixed variances (inflated on a flagged step);
 - ``twist_covariance``: the pose covariance in the base's axes over ``dt^2``; ``UNKNOWN_VARIANCE`` on the
-  diagonal while the twist is unknown (first step, restart, no ``dt``): huge, never zero.
+  diagonal while the twist is unknown (first step, restart, no ``dt``): huge, never zero;
+- :func:`aligned_points`: the scan in odom, for the aligned cloud.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from typing import Any, Optional
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.extrinsic import BaseFrame, in_body_axes
 
 UNKNOWN_VARIANCE = 1e6  # a twist nobody measured yet (the first scan): huge, never zero
@@ -75,3 +77,13 @@ def odometry_output(step: Any, base: BaseFrame, dt_s: Optional[float], cfg: Any,
         linear, angular = np.zeros(3), np.zeros(3)
         twist_cov = np.eye(6) * UNKNOWN_VARIANCE
     return OdometryOutput(T_odom_base, relative, linear, angular, pose_cov, twist_cov, known)
+
+
+def aligned_points(points_sensor: np.ndarray, T_odom_sensor: np.ndarray, voxel: float) -> np.ndarray:
+    """A scan's points in odom for the aligned cloud output, thinned to one per ``voxel`` (m) when > 0."""
+    points_odom = apply_transform(T_odom_sensor, points_sensor)
+    if voxel <= 0:
+        return points_odom
+    from cemnet_ros.pipeline.preprocess import voxel_downsample  # numba: not at the node's start-up
+
+    return voxel_downsample(points_odom, voxel)

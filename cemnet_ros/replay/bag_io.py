@@ -13,7 +13,6 @@ from cemnet_ros.replay.bag_types import (
     TF_TOPIC,
     TYPESTORE,
     BagError,
-    matrix_to_pose_msg,
     ns_to_stamp,
     stamp_to_ns,
 )
@@ -22,5 +21,5 @@ from cemnet_ros.replay.bag_writer import BagWriter
 __all__ = [
     "BagError", "BagInfo", "BagReader", "BagWriter", "CloudFrame", "SkippedMessage", "GROUND_TRUTH_TOPIC",
     "ODOMETRY", "POINTCLOUD2", "POSE_STAMPED", "TF_MESSAGE", "TF_STATIC_TOPIC", "TF_TOPIC", "TYPESTORE",
-    "UNKNOWN_VARIANCE", "matrix_to_pose_msg", "ns_to_stamp", "stamp_to_ns",
+    "UNKNOWN_VARIANCE", "ns_to_stamp", "stamp_to_ns",
 ]

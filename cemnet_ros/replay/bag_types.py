@@ -1,10 +1,10 @@
-"""What the bag reader and writer share: the ROS 2 Jazzy typestore, message type names, BagError and the
-stamp/pose conversions between rosbags messages and numpy."""
+"""What the bag reader and writer share: the ROS 2 Jazzy typestore, message type names, BagError, stamp
+conversions and the rosbags class lookup that the shared message fillers (:mod:`cemnet_ros.pose_messages`) use."""
 from __future__ import annotations
 
-import numpy as np
 from rosbags.typesys import Stores, get_typestore
-from scipy.spatial.transform import Rotation
+
+from cemnet_ros import pose_messages
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -24,25 +24,17 @@ def stamp_to_ns(stamp) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+def rosbags_type(name: str):
+    """The rosbags (Jazzy) class of a full type name, e.g. ``"nav_msgs/msg/Odometry"``: the lookup that
+    :mod:`cemnet_ros.pose_messages` fills the writer's messages with."""
+    return TYPESTORE.types[name]
+
+
 def ns_to_stamp(stamp_ns: int):
     """Integer nanoseconds -> rosbags builtin_interfaces/msg/Time."""
-    if stamp_ns < 0:
-        raise ValueError(f"stamp must be >= 0 ns, got {stamp_ns}")
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return TYPESTORE.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
-
-
-def matrix_to_pose_msg(transform: np.ndarray):
-    """4x4 matrix -> rosbags geometry_msgs/msg/Pose."""
-    types = TYPESTORE.types
-    qx, qy, qz, qw = Rotation.from_matrix(np.asarray(transform)[:3, :3]).as_quat()
-    x, y, z = (float(v) for v in np.asarray(transform)[:3, 3])
-    return types["geometry_msgs/msg/Pose"](
-        position=types["geometry_msgs/msg/Point"](x=x, y=y, z=z),
-        orientation=types["geometry_msgs/msg/Quaternion"](x=float(qx), y=float(qy), z=float(qz), w=float(qw)),
-    )
+    return pose_messages.stamp(rosbags_type, stamp_ns)
 
 
 def header(frame_id: str, stamp_ns: int):
     """rosbags std_msgs/msg/Header."""
-    return TYPESTORE.types["std_msgs/msg/Header"](stamp=ns_to_stamp(stamp_ns), frame_id=frame_id)
+    return pose_messages.header(rosbags_type, frame_id, ns_to_stamp(stamp_ns))

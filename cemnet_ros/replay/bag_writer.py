@@ -1,10 +1,11 @@
 """Write result bags with ``rosbags`` (no rclpy/DDS): one ``.mcap`` file (zstd chunks), atomically.
 
-The writer fills the rosbags (ROS 2 Jazzy) types of what align_node publishes: PoseStamped, nav_msgs/Odometry
-with twist and covariances, tf2_msgs/TFMessage and PointCloud2; messages read from another bag (e.g. its
-ground truth) are copied with :meth:`BagWriter.write_message`. The bag is built in a temporary directory beside
-the target and moved into place only when complete, so a crash never leaves a half-written bag under the final
-name.
+The writer fills the rosbags (ROS 2 Jazzy) types of what align_node publishes, with the node's own fillers
+(:mod:`cemnet_ros.pose_messages`, :func:`~cemnet_ros.pointcloud2.make_pointcloud2`): PoseStamped,
+nav_msgs/Odometry with twist and covariances, tf2_msgs/TFMessage and PointCloud2; messages read from another
+bag (e.g. its ground truth) are copied with :meth:`BagWriter.write_message`. The bag is built in a temporary
+directory beside the target and moved into place only when complete, so a crash never leaves a half-written
+bag under the final name.
 """
 from __future__ import annotations
 
@@ -15,9 +16,10 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+from rosbags.interfaces import Connection
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
-from cemnet_ros.pipeline.odometry_output import UNKNOWN_VARIANCE  # align_node's unmeasured twist
+from cemnet_ros import pose_messages
 from cemnet_ros.pointcloud2 import make_pointcloud2
 from cemnet_ros.replay.bag_types import (
     ODOMETRY,
@@ -26,8 +28,8 @@ from cemnet_ros.replay.bag_types import (
     TF_MESSAGE,
     TYPESTORE,
     header,
-    matrix_to_pose_msg,
     ns_to_stamp,
+    rosbags_type,
 )
 
 
@@ -47,7 +49,7 @@ class BagWriter:
         self.compress = compress
         self._tmpdir: Optional[Path] = None
         self._writer: Optional[Writer] = None
-        self._connections: dict[str, object] = {}
+        self._connections: dict[str, Connection] = {}
 
     def __enter__(self) -> "BagWriter":
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -90,51 +92,26 @@ class BagWriter:
 
     def write_cloud(self, topic: str, points: np.ndarray, frame_id: str, stamp_ns: int) -> None:
         """PointCloud2 with float32 x, y, z (little endian, unorganised)."""
-        types = TYPESTORE.types
-        msg = make_pointcloud2(types[POINTCLOUD2], types["sensor_msgs/msg/PointField"], points, frame_id,
-                               ns_to_stamp(stamp_ns), header_cls=types["std_msgs/msg/Header"])
+        msg = make_pointcloud2(rosbags_type(POINTCLOUD2), rosbags_type("sensor_msgs/msg/PointField"), points,
+                               frame_id, ns_to_stamp(stamp_ns), header_cls=rosbags_type("std_msgs/msg/Header"))
         self._write(topic, POINTCLOUD2, msg, stamp_ns)
 
     def write_pose(self, topic: str, transform: np.ndarray, frame_id: str, stamp_ns: int) -> None:
         """PoseStamped: a pose (4x4 ``transform``) in ``frame_id``."""
-        msg = TYPESTORE.types[POSE_STAMPED](header=header(frame_id, stamp_ns), pose=matrix_to_pose_msg(transform))
+        msg = pose_messages.pose_stamped(rosbags_type, header(frame_id, stamp_ns), transform)
         self._write(topic, POSE_STAMPED, msg, stamp_ns)
 
     def write_odometry(self, topic: str, transform: np.ndarray, covariance: np.ndarray, frame_id: str,
                        child_frame_id: str, stamp_ns: int, *, linear: Optional[np.ndarray] = None,
                        angular: Optional[np.ndarray] = None, twist_covariance: Optional[np.ndarray] = None) -> None:
-        """nav_msgs/Odometry: the pose of ``child_frame_id`` in ``frame_id`` with its covariance (6x6, ROS order
-        x,y,z,roll,pitch,yaw) and the twist in ``child_frame_id`` (REP-105). Without ``twist_covariance`` the
-        twist is unknown: zero, with UNKNOWN_VARIANCE on the covariance diagonal (as align_node's first step)."""
-        types = TYPESTORE.types
-        cov = np.asarray(covariance, dtype=np.float64).reshape(36)
-        vec3 = types["geometry_msgs/msg/Vector3"]
-
-        def vector(v) -> object:
-            x, y, z = (0.0, 0.0, 0.0) if v is None else (float(c) for c in np.asarray(v, dtype=np.float64))
-            return vec3(x=x, y=y, z=z)
-
-        if twist_covariance is None:
-            linear, angular, twist_covariance = None, None, np.eye(6) * UNKNOWN_VARIANCE
-        twist = types["geometry_msgs/msg/Twist"](linear=vector(linear), angular=vector(angular))
-        msg = types[ODOMETRY](
-            header=header(frame_id, stamp_ns),
-            child_frame_id=child_frame_id,
-            pose=types["geometry_msgs/msg/PoseWithCovariance"](pose=matrix_to_pose_msg(transform), covariance=cov),
-            twist=types["geometry_msgs/msg/TwistWithCovariance"](
-                twist=twist, covariance=np.asarray(twist_covariance, dtype=np.float64).reshape(36).copy()),
-        )
+        """nav_msgs/Odometry of ``child_frame_id`` in ``frame_id``, as :func:`cemnet_ros.pose_messages.odometry`
+        fills it (covariances 6x6 in ROS order; without ``twist_covariance`` the twist is unknown)."""
+        msg = pose_messages.odometry(rosbags_type, header(frame_id, stamp_ns), child_frame_id, transform, covariance,
+                                     linear=linear, angular=angular, twist_covariance=twist_covariance)
         self._write(topic, ODOMETRY, msg, stamp_ns)
 
     def write_transform(self, topic: str, transform: np.ndarray, parent_frame: str, child_frame: str,
                         stamp_ns: int) -> None:
         """tf2_msgs/TFMessage with one TransformStamped: ``child_frame`` in ``parent_frame`` (4x4)."""
-        types = TYPESTORE.types
-        pose = matrix_to_pose_msg(transform)
-        p = pose.position
-        tf = types["geometry_msgs/msg/TransformStamped"](
-            header=header(parent_frame, stamp_ns), child_frame_id=child_frame,
-            transform=types["geometry_msgs/msg/Transform"](
-                translation=types["geometry_msgs/msg/Vector3"](x=p.x, y=p.y, z=p.z), rotation=pose.orientation))
-        self._write(topic, TF_MESSAGE, types[TF_MESSAGE](transforms=[tf]), stamp_ns)
-
+        msg = pose_messages.tf_message(rosbags_type, header(parent_frame, stamp_ns), child_frame, transform)
+        self._write(topic, TF_MESSAGE, msg, stamp_ns)

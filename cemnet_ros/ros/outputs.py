@@ -1,7 +1,7 @@
-"""The node's publishers and how a step, the map and the status become messages."""
+"""The node's publishers: each output's numbers (computed in the pipeline) become messages here, nothing more."""
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -11,9 +11,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2, PointField
 
-from cemnet_ros.pipeline.extrinsic import BaseFrame
-from cemnet_ros.pipeline.odometry_output import odometry_output
-from cemnet_ros.pointcloud2 import make_pointcloud2
+from cemnet_ros.pipeline.aligner_session import StepResult
+from cemnet_ros.pipeline.odometry_output import aligned_points
+from cemnet_ros.pipeline.scan_status import ScanVerdict
+from cemnet_ros.pointcloud2 import make_pointcloud2, transformed_cloud
 from cemnet_ros.ros import messages
 from cemnet_ros.ros.node_config import NodeConfig
 
@@ -26,8 +27,8 @@ except ImportError:  # pragma: no cover - depends on the installation
 class NodeOutputs:
     """~/pose, ~/odometry, /tf, ~/aligned_cloud, ~/local_map (latched), ~/scan_status and /diagnostics."""
 
-    def __init__(self, node: Node, cfg: NodeConfig, covariance_inflation: float) -> None:
-        self._node, self._cfg, self._inflation = node, cfg, covariance_inflation
+    def __init__(self, node: Node, cfg: NodeConfig) -> None:
+        self._node, self._cfg = node, cfg
         self._pose = node.create_publisher(PoseStamped, "~/pose", 10)
         self._odom = node.create_publisher(Odometry, "~/odometry", 10)
         self._cloud = node.create_publisher(PointCloud2, "~/aligned_cloud", 10) if cfg.publish_aligned_cloud \
@@ -43,38 +44,33 @@ class NodeOutputs:
             node.get_logger().warn("tf2_msgs is not importable: /tf is not published (pip install: run "
                                    "scripts/build_tf2_msgs.sh; a full ROS install has it)")
 
-    def step(self, step: Any, source: Any, frame: str, base: BaseFrame, dt_s: Optional[float]) -> None:
-        """Pose, odometry, aligned cloud and TF of one step; ``source`` is the decoded scan (msg + points)."""
-        cfg = self._cfg
-        # The numbers (base pose, motion, twist, covariances) are cemnet-replay's too: pipeline/odometry_output.py.
-        out = odometry_output(step, base, dt_s, cfg, self._inflation)
-        pose = PoseStamped()
-        pose.header.stamp, pose.header.frame_id = source.msg.header.stamp, frame
-        messages.fill_pose(pose.pose, out.T_odom_base)
-        self._pose.publish(pose)
-        self._odom.publish(messages.odometry(pose.header, cfg.base_frame, out))
+    def step(self, result: StepResult, source: Any, frame: str) -> None:
+        """Pose, odometry, aligned cloud and TF of one step, in ``frame`` at the stamp of ``source`` (the decoded
+        scan: msg + points). The numbers are cemnet-replay's too (pipeline/odometry_output.py), and so are the
+        fillers (cemnet_ros/pose_messages.py)."""
+        cfg, out, stamp = self._cfg, result.out, source.msg.header.stamp
+        head = messages.header(frame, stamp)
+        self._pose.publish(messages.pose_stamped(head, out.T_odom_base))
+        self._odom.publish(messages.odometry(head, cfg.base_frame, out))
         if self._cloud is not None:
-            self._cloud.publish(self._aligned_cloud(source, out.T_odom_base @ base.T_base_sensor, frame))
+            self._cloud.publish(self._aligned_cloud(source, result.T_odom_sensor, frame))
         if self._tf is not None:
             parent, child, T = frame, cfg.base_frame, out.T_odom_base
             if cfg.invert_tf:
                 parent, child, T = child, parent, np.linalg.inv(out.T_odom_base)
-            header = type(pose.header)(stamp=pose.header.stamp, frame_id=parent)
-            self._tf.publish(TFMessage(transforms=[messages.transform(header, child, T)]))
+            self._tf.publish(messages.tf_message(messages.header(parent, stamp), child, T))
 
     def _aligned_cloud(self, source: Any, T_odom_sensor: np.ndarray, frame: str) -> PointCloud2:
         voxel = self._cfg.aligned_cloud_voxel
-        if voxel <= 0:
-            return messages.transformed_cloud(source.msg, T_odom_sensor, frame)
-        from cemnet_ros.pipeline.preprocess import voxel_downsample
+        if voxel <= 0:  # every field of the input kept
+            return transformed_cloud(PointCloud2, source.msg, T_odom_sensor, frame)
+        return make_pointcloud2(PointCloud2, PointField, aligned_points(source.points, T_odom_sensor, voxel), frame,
+                                source.msg.header.stamp)
 
-        points = voxel_downsample(source.points @ T_odom_sensor[:3, :3].T + T_odom_sensor[:3, 3], voxel)
-        return make_pointcloud2(PointCloud2, PointField, points, frame, source.msg.header.stamp)
-
-    def scan_status(self, stamp_ns: Optional[int], level: int, message: str, **values: Any) -> None:
-        """The verdict on one input message: OK (a good step), WARN (flagged, published), ERROR (rejected, with
-        its kind in ``values``); name = the message's stamp in ns ("" when it could not be read)."""
-        self._scan_status.publish(_status("" if stamp_ns is None else str(stamp_ns), level, message, values))
+    def scan_status(self, verdict: ScanVerdict) -> None:
+        """The verdict on one input message (pipeline/scan_status.py); name = its stamp in ns ("" when unreadable)."""
+        name = "" if verdict.stamp_ns is None else str(verdict.stamp_ns)
+        self._scan_status.publish(_status(name, verdict.level, verdict.message, verdict.values))
 
     def wants_map(self) -> bool:
         return self._map.get_subscription_count() > 0
