@@ -12,7 +12,8 @@ own message types with the result, so a replayed bag carries exactly what the no
   (``covariance_mode`` registration) or the fixed variances (inflated on a flagged step);
 - ``twist_covariance``: the pose covariance in the base's axes over ``dt^2``; ``UNKNOWN_VARIANCE`` on the
   diagonal while the twist is unknown (first step, restart, no ``dt``): huge, never zero;
-- :func:`aligned_points`: the scan in odom, for the aligned cloud.
+- :func:`aligned_points`: the scan in odom, for the aligned cloud;
+- :func:`tf_parent_child`: the /tf transform's frames and direction.
 """
 from __future__ import annotations
 
@@ -87,3 +88,12 @@ def aligned_points(points_sensor: np.ndarray, T_odom_sensor: np.ndarray, voxel: 
     from cemnet_ros.pipeline.preprocess import voxel_downsample  # numba: not at the node's start-up
 
     return voxel_downsample(points_odom, voxel)
+
+
+def tf_parent_child(odom_frame: str, base_frame: str, T_odom_base: np.ndarray, invert: bool
+                    ) -> tuple[str, str, np.ndarray]:
+    """(parent, child, transform) of the /tf message: odom -> base, or base -> odom with ``invert`` (``invert_tf``:
+    for a TF tree whose base frame has a parent already)."""
+    if invert:
+        return base_frame, odom_frame, np.linalg.inv(T_odom_base)
+    return odom_frame, base_frame, T_odom_base

@@ -18,10 +18,9 @@ from typing import Optional
 import numpy as np
 from tqdm import tqdm
 
-from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.pipeline.input_checks import ScanRejected
-from cemnet_ros.pipeline.odometry_output import OdometryOutput, odometry_output
+from cemnet_ros.pipeline.odometry_output import OdometryOutput, aligned_points, odometry_output, tf_parent_child
 from cemnet_ros.replay.bag_io import (
     ODOMETRY,
     POINTCLOUD2,
@@ -52,13 +51,6 @@ class ReplayResult:
     rejected: list[dict] = field(default_factory=list)  # those of them the aligner refused (ScanRejected, ...)
     n_messages: int = 0  # cloud messages read (processed + skipped)
     wall_s: float = 0.0
-
-
-def tf_parent_child(node: NodeConfig, T_odom_base: np.ndarray) -> tuple[str, str, np.ndarray]:
-    """(parent, child, transform) of the /tf message, as align_node publishes it (invert_tf: base -> odom)."""
-    if node.invert_tf:
-        return node.base_frame, node.odom_frame, np.linalg.inv(T_odom_base)
-    return node.odom_frame, node.base_frame, T_odom_base
 
 
 def output_topics(node: NodeConfig) -> dict[str, str]:
@@ -136,22 +128,17 @@ class _Replayer:
         self.result.steps.append(_step_record(frame.index, step, out))
 
     def publish(self, stamp_ns: int, points: np.ndarray, out: OdometryOutput) -> None:
-        """align_node._publish offline: pose, odometry, /tf and the aligned cloud, after the copies due by then."""
+        """What align_node publishes, offline: pose, odometry, /tf, the aligned cloud, after the copies due by then."""
         node, bag = self.node, self.bag
         self.copy_until(stamp_ns)
         bag.write_pose(POSE_TOPIC, out.T_odom_base, node.odom_frame, stamp_ns)
         bag.write_odometry(ODOM_TOPIC, out.T_odom_base, out.pose_covariance, node.odom_frame, node.base_frame,
                            stamp_ns, linear=out.linear, angular=out.angular, twist_covariance=out.twist_covariance)
         if node.publish_aligned_cloud:
-            T_odom_sensor = out.T_odom_base @ self.base.T_base_sensor
-            aligned = apply_transform(T_odom_sensor, points)
-            if node.aligned_cloud_voxel > 0:
-                from cemnet_ros.pipeline.preprocess import voxel_downsample
-
-                aligned = voxel_downsample(aligned, node.aligned_cloud_voxel)
+            aligned = aligned_points(points, out.T_odom_base @ self.base.T_base_sensor, node.aligned_cloud_voxel)
             bag.write_cloud(CLOUD_TOPIC, aligned, node.odom_frame, stamp_ns)
         if node.publish_tf:
-            parent, child, T = tf_parent_child(node, out.T_odom_base)
+            parent, child, T = tf_parent_child(node.odom_frame, node.base_frame, out.T_odom_base, node.invert_tf)
             bag.write_transform(TF_TOPIC, T, parent, child, stamp_ns)
 
 

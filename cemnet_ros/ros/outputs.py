@@ -12,7 +12,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2, PointField
 
 from cemnet_ros.pipeline.aligner_session import StepResult
-from cemnet_ros.pipeline.odometry_output import aligned_points
+from cemnet_ros.pipeline.odometry_output import aligned_points, tf_parent_child
 from cemnet_ros.pipeline.scan_status import ScanVerdict
 from cemnet_ros.pointcloud2 import make_pointcloud2, transformed_cloud
 from cemnet_ros.ros import messages
@@ -55,9 +55,7 @@ class NodeOutputs:
         if self._cloud is not None:
             self._cloud.publish(self._aligned_cloud(source, result.T_odom_sensor, frame))
         if self._tf is not None:
-            parent, child, T = frame, cfg.base_frame, out.T_odom_base
-            if cfg.invert_tf:
-                parent, child, T = child, parent, np.linalg.inv(out.T_odom_base)
+            parent, child, T = tf_parent_child(frame, cfg.base_frame, out.T_odom_base, cfg.invert_tf)
             self._tf.publish(messages.tf_message(messages.header(parent, stamp), child, T))
 
     def _aligned_cloud(self, source: Any, T_odom_sensor: np.ndarray, frame: str) -> PointCloud2:

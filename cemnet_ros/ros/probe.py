@@ -29,11 +29,11 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
+from cemnet_ros.data.shared import REPO, SHARED
 from cemnet_ros.ros.scans import HEADER_STAMP_OFFSET
 
-REPO = Path(__file__).resolve().parents[2]
 PROFILE = REPO / "config" / "fastdds_large_data.xml"
-KITTI = REPO.parent / "shared" / "data" / "kitti_sample" / "velodyne"
+KITTI = SHARED / "data" / "kitti_sample" / "velodyne"
 
 
 def dds_environment() -> dict[str, str]:
