@@ -1,6 +1,23 @@
 """Shared test fixtures."""
+from pathlib import Path
+
 import numpy as np
 import pytest
+
+KERNEL_FOLDERS = {"core", "pipeline", "ros", "replay", "tools", "bench", "train", "eval"}  # tests that run numba
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels(request):
+    """The numba kernels compiled once per session (~25 s), before the first test instead of inside whichever
+    test runs them first: each test's time and timeouts stay its own. Skipped when no selected test needs them."""
+    if any(Path(item.path).parent.name in KERNEL_FOLDERS for item in request.session.items):
+        from cemnet_ros.core import lattice_rewards
+        from cemnet_ros.pipeline import preprocess, refine
+
+        lattice_rewards.compile_kernels()
+        preprocess.compile_kernels()
+        refine.compile_kernels()
 
 
 @pytest.fixture

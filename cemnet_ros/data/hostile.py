@@ -5,7 +5,7 @@ malformed layouts, degenerate geometry, stamp faults, data-level faults (a secto
 few points of the previous scan), oversized clouds and byte streams that are no serialized PointCloud2 (a
 publisher may send raw CDR bytes; ``build`` then returns ``bytes``). The node must reject each one with a
 counted reason, or publish it flagged, or (``handled``) process it with a warning; and the valid scans around
-them must come out as they would without them. Used by test/test_node_hostile.py and scripts/soak_node.py.
+them must come out as they would without them. Used by test/ros/test_node_hostile.py and scripts/soak_node.py.
 """
 from __future__ import annotations
 

@@ -25,3 +25,15 @@ def make_world(seed: int = 1, n: int = 20000) -> np.ndarray:
     wall_b = np.c_[np.full(n // 8, 15.0), rng.uniform(-6, 6, n // 8), rng.uniform(-1.5, 3, n // 8)]
     boxes = [rng.uniform(-0.8, 0.8, (n // 32, 3)) + [c[0], c[1], -0.7] for c in rng.uniform(-12, 12, (8, 2))]
     return np.vstack([ground, wall_a, wall_b] + boxes)
+
+
+def seen_from(world: np.ndarray, T_world_sensor: np.ndarray) -> np.ndarray:
+    """``world`` points (n, 3) in the frame of a sensor at ``T_world_sensor``."""
+    return (world - T_world_sensor[:3, 3]) @ T_world_sensor[:3, :3]
+
+
+def street_scan(world: np.ndarray, T_world_sensor: np.ndarray, rng: np.random.Generator, n: int = 12000
+                ) -> np.ndarray:
+    """A scan-like random subset of ``n`` of the world's points seen from ``T_world_sensor``, in random order."""
+    points = seen_from(world, T_world_sensor)
+    return points[rng.permutation(len(points))[:n]]

@@ -94,4 +94,4 @@ def test_kitti_scans_full_resolution_and_velodyne_ground_truth(tmp_path: Path):
 
 def test_shared_dir_is_the_repository_sibling_or_none():
     found = shared_dir()
-    assert found is None or (found.is_dir() and found == Path(__file__).resolve().parents[1].parent / "shared")
+    assert found is None or (found.is_dir() and found == Path(__file__).resolve().parents[2].parent / "shared")

@@ -159,7 +159,7 @@ def test_ablation_table_script(shapes_npz, random_weights, tmp_path, capsys):
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "scripts" / "ablation_table.py"
+    path = Path(__file__).resolve().parents[2] / "scripts" / "ablation_table.py"
     spec = importlib.util.spec_from_file_location("ablation_table", path)
     ablation = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ablation)

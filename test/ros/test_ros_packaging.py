@@ -9,7 +9,7 @@ from pathlib import Path
 
 import yaml
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PACKAGE = "cemnet_ros"
 LAUNCH_FILE = REPO / "launch" / "align_node.launch.py"
 RVIZ_FILE = REPO / "rviz" / "cemnet_ros.rviz"

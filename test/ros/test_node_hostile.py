@@ -8,9 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
+from node_harness import WORLD, Harness, pose_of, wait_for
 from sensor_msgs.msg import PointCloud2, PointField
-from test_align_node import WORLD, Harness, context, pose_error, pose_of, wait_for  # noqa: F401 - the fixture
 
+from cemnet_ros.bench.metrics import relative_error
 from cemnet_ros.data.hostile import corpus
 from cemnet_ros.data.street import make_transform
 from cemnet_ros.pointcloud2 import make_pointcloud2
@@ -64,7 +65,7 @@ def _run(h, hostile):
     return valid, verdicts
 
 
-def test_hostile_corpus_is_rejected_or_flagged_and_valid_scans_are_unchanged(context):  # noqa: F811
+def test_hostile_corpus_is_rejected_or_flagged_and_valid_scans_are_unchanged(context):
     params = {"qos_reliability": "reliable", "queue_size": 10}
     clean = Harness(context, "hostile_clean", params)
     try:
@@ -87,5 +88,5 @@ def test_hostile_corpus_is_rejected_or_flagged_and_valid_scans_are_unchanged(con
         if not ok:
             wrong.append((case.name, level, status.message))
     assert not wrong, wrong
-    errors = [pose_error(clean_poses[k], poses[k]) for k in range(N_VALID)]
+    errors = [relative_error(poses[k], clean_poses[k]) for k in range(N_VALID)]
     assert max(e[0] for e in errors) <= 1e-3 and max(e[1] for e in errors) <= 0.01, errors

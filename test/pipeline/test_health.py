@@ -20,7 +20,6 @@ def with_(**changes):
     return Signals(**{**vars(GOOD), **changes})
 
 
-# -- adaptive spread ------------------------------------------------------------------------------------------
 def test_spread_starts_at_the_initial_values_then_follows_the_prediction_errors():
     spread = AdaptiveSpread(AdaptiveConfig(initial_rotation=0.05, initial_translation=0.5, factor=3.0))
     assert spread.spread() == (0.05, 0.5)
@@ -44,7 +43,6 @@ def test_spread_is_clipped():
         AdaptiveConfig(min_rotation=0.5, max_rotation=0.1)
 
 
-# -- failure signals ------------------------------------------------------------------------------------------
 def test_each_failure_signal_flags_on_its_own():
     monitor = HealthMonitor(HealthConfig())
     assert monitor.failures(GOOD, 1.0) == [] and not monitor.degenerate(GOOD)
@@ -69,7 +67,6 @@ def test_fitness_is_judged_against_its_running_level():
     assert monitor.level is None
 
 
-# -- covariance and degenerate directions -----------------------------------------------------------------
 def corridor_hessian(length=10.0):
     """Point-to-plane Hessian of a corridor along x: normals +-y (walls) and +-z (floor, ceiling) only."""
     rng = np.random.default_rng(0)

@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import os
-import random
-import threading
 import time
 from pathlib import Path
 
@@ -14,19 +12,16 @@ from scipy.spatial.transform import Rotation
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
 
-import rclpy  # noqa: E402
 from builtin_interfaces.msg import Time  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from geometry_msgs.msg import PoseStamped  # noqa: E402
-from nav_msgs.msg import Odometry  # noqa: E402
+from node_harness import FIRST_TIMEOUT, POSES, WORLD, pose_of, scan_msg, stamp, wait_for  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from cemnet_ros.data.street import make_transform, make_world  # noqa: E402
+from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from cemnet_ros.data.street import make_transform  # noqa: E402
 from cemnet_ros.pointcloud2 import decode_xyz, make_pointcloud2  # noqa: E402
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
 from cemnet_ros.ros.node_config import node_parameters, params_file_text  # noqa: E402
@@ -34,138 +29,10 @@ from cemnet_ros.ros.outputs import TFMessage  # noqa: E402
 
 pytestmark = pytest.mark.dds
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 BAGS = sorted((REPO / "bags").glob("*.mcap"))
-FAST = {"registration.cem.n_candidates": 300, "registration.cem.n_iters": 6, "qos_reliability": "reliable",
-        "queue_size": 10, "publish_aligned_cloud": True}
-FIRST_TIMEOUT = 120.0  # the first registration JIT-compiles the numba kernels on a cold cache
 
 
-WORLD = make_world()
-POSES = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
-
-
-def scan_msg(k, pose=None, n=12000, frame="lidar"):
-    rng = np.random.default_rng(100 + k)
-    pose = POSES[k] if pose is None else pose
-    pts = (WORLD - pose[:3, 3]) @ pose[:3, :3]
-    return make_pointcloud2(PointCloud2, PointField, pts[rng.permutation(len(pts))[:n]], frame, stamp(k))
-
-
-def stamp(k):
-    ns = 1_000_000_000 + k * 100_000_000
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
-def pose_of(msg):
-    """4x4 pose of an Odometry or PoseStamped message."""
-    pose = msg.pose.pose if isinstance(msg, Odometry) else msg.pose
-    q, p = pose.orientation, pose.position
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-    out[:3, 3] = [p.x, p.y, p.z]
-    return out
-
-
-def pose_error(a, b):
-    err = np.linalg.inv(a) @ b
-    return float(np.linalg.norm(err[:3, 3])), float(np.degrees(np.linalg.norm(
-        Rotation.from_matrix(err[:3, :3]).as_rotvec())))
-
-
-def wait_for(predicate, timeout):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
-
-
-class Harness:
-    """An align_node plus a probe node (publishers, subscribers, reset client) spinning in one background thread."""
-
-    def __init__(self, context, namespace, overrides, input_topics=("points",), target_latched=None):
-        params = [Parameter(k, value=v) for k, v in {**FAST, **overrides}.items()]
-        self.node = AlignNode(context=context, namespace=namespace, parameter_overrides=params)
-        self.probe = rclpy.create_node("probe", namespace=namespace, context=context)
-        self.odometry, self.poses, self.clouds, self.diagnostics, self.logs, self.tfs = [], [], [], [], [], []
-        self.statuses = []  # ~/scan_status: one verdict per input message
-        self.namespace = namespace
-        ns = f"/{namespace}/align_node"
-        self.probe.create_subscription(Odometry, f"{ns}/odometry", self.odometry.append, 50)
-        self.probe.create_subscription(PoseStamped, f"{ns}/pose", self.poses.append, 50)
-        self.probe.create_subscription(DiagnosticStatus, f"{ns}/scan_status", self.statuses.append, 200)
-        self.probe.create_subscription(PointCloud2, f"{ns}/aligned_cloud", self.clouds.append, 50)
-        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
-        self.probe.create_subscription(Log, "/rosout", self._on_log, 100)
-        if TFMessage is not None:
-            self.probe.create_subscription(TFMessage, "/tf", self.tfs.append, 100)
-        self.pubs = {t: self.probe.create_publisher(PointCloud2, f"/{namespace}/{t}", 10) for t in input_topics}
-        if target_latched is not None:
-            qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-            self.pubs[target_latched] = self.probe.create_publisher(PointCloud2, f"/{namespace}/{target_latched}",
-                                                                    qos)
-        self.reset_client = self.probe.create_client(Trigger, f"{ns}/reset")
-        self.name = f"{ns}: alignment"
-        self.executor = MultiThreadedExecutor(num_threads=2, context=context)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.probe)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-        for topic, pub in self.pubs.items():
-            assert wait_for(lambda: pub.get_subscription_count() > 0, 10.0), f"node never subscribed {topic}"
-
-    def _on_diag(self, msg):
-        self.diagnostics.extend(s for s in msg.status if s.name == self.name)
-
-    def _on_log(self, msg):
-        if msg.name.endswith("align_node"):
-            self.logs.append(msg)
-
-    def values(self):
-        return {kv.key: kv.value for kv in self.diagnostics[-1].values} if self.diagnostics else {}
-
-    def send(self, msg, topic="points", timeout=60.0, expect_output=True):
-        """Publish ``msg``; wait for its odometry (or just give the node time when no output is expected)."""
-        count = len(self.odometry)
-        self.pubs[topic].publish(msg)
-        if expect_output:
-            assert wait_for(lambda: len(self.odometry) > count, timeout), "no odometry output"
-            return self.odometry[-1]
-        return None
-
-    def close(self):
-        self.executor.shutdown()
-        self.thread.join(10)
-        self.node.destroy_node()
-        self.probe.destroy_node()
-
-
-@pytest.fixture(scope="module")
-def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.Random(os.getpid() ^ time.time_ns()).randint(1, 200))
-    yield ctx
-    rclpy.shutdown(context=ctx)
-
-
-@pytest.fixture
-def harness_factory(context, request):
-    made = []
-
-    def make(overrides=None, **kwargs):
-        namespace = f"t{len(made)}_{request.node.name.replace('[', '_').replace(']', '').replace('-', '_')}"[:60]
-        made.append(Harness(context, namespace.lower(), overrides or {}, **kwargs))
-        return made[-1]
-
-    yield make
-    for harness in made:
-        harness.close()
-
-
-# ------------------------------------------------------------------------------------------------------------
 def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_node(context, tmp_path):
     path = REPO / "config" / "align_node.yaml"
     assert path.read_text() == params_file_text(), "regenerate: python -m cemnet_ros.ros.node_config"
@@ -204,11 +71,11 @@ def test_sequential_odometry_follows_the_ground_truth(harness_factory):
     for k, odom in enumerate(outputs):
         assert odom.header.frame_id == "odom" and odom.child_frame_id == "base_link"
         assert (odom.header.stamp.sec, odom.header.stamp.nanosec) == (stamp(k).sec, stamp(k).nanosec)
-        trans_err, rot_err = pose_error(POSES[k], pose_of(odom))
+        trans_err, rot_err = relative_error(pose_of(odom), POSES[k])
         assert trans_err < 0.02 * k + 0.01 and rot_err < 0.1 * k + 0.01, (k, trans_err, rot_err)
         if k:
-            rel_t, rel_r = pose_error(np.linalg.inv(POSES[k - 1]) @ POSES[k],
-                                      np.linalg.inv(pose_of(outputs[k - 1])) @ pose_of(odom))
+            rel_t, rel_r = relative_error(np.linalg.inv(pose_of(outputs[k - 1])) @ pose_of(odom),
+                                          np.linalg.inv(POSES[k - 1]) @ POSES[k])
             assert rel_t < 0.02 and rel_r < 0.1, (k, rel_t, rel_r)
     covs = np.array([np.diag(np.reshape(o.pose.covariance, (6, 6))) for o in outputs[1:]])
     assert np.all(covs > 0) and np.ptp(covs, axis=0).max() > 0
@@ -262,7 +129,7 @@ def test_bad_inputs_are_counted_warned_and_do_not_stop_valid_scans(harness_facto
         assert wait_for(lambda: any(f"[{kind}]" in log.msg and log.level == Log.WARN for log in h.logs), 5), kind
     # The scene moved on meanwhile: the next valid scan still aligns.
     odom = h.send(scan_msg(1, pose=POSES[1]), timeout=FIRST_TIMEOUT)
-    trans_err, _ = pose_error(POSES[1], pose_of(odom))
+    trans_err, _ = relative_error(pose_of(odom), POSES[1])
     assert trans_err < 0.02
     assert wait_for(lambda: h.values().get("rejected_inputs") == "6", 5)
     assert wait_for(lambda: any(d.level == d.WARN for d in h.diagnostics), 5)
@@ -289,7 +156,7 @@ def test_a_scan_whose_processing_raises_gets_an_error_verdict_and_one_traceback(
     assert {kv.key: kv.value for kv in verdict.values}.get("error") == "RuntimeError"
     assert wait_for(lambda: any("Traceback" in log.msg and log.level == Log.ERROR for log in h.logs), 5)
     odom = h.send(scan_msg(2, pose=POSES[2]))  # the next scan goes on
-    assert pose_error(POSES[2], pose_of(odom))[0] < 0.02
+    assert relative_error(pose_of(odom), POSES[2])[0] < 0.02
 
 
 def test_reset_restarts_the_map_and_keeps_odom_continuous(harness_factory):
@@ -304,7 +171,7 @@ def test_reset_restarts_the_map_and_keeps_odom_continuous(harness_factory):
     odom = h.send(scan_msg(3))
     np.testing.assert_allclose(pose_of(odom), before, atol=1e-9)  # REP-105: odom does not jump
     odom = h.send(scan_msg(4))
-    trans_err, _ = pose_error(np.linalg.inv(POSES[3]) @ POSES[4], np.linalg.inv(before) @ pose_of(odom))
+    trans_err, _ = relative_error(np.linalg.inv(before) @ pose_of(odom), np.linalg.inv(POSES[3]) @ POSES[4])
     assert trans_err < 0.02
 
 
@@ -342,7 +209,7 @@ def test_set_pose_local_map_and_save_map(harness_factory, tmp_path, monkeypatch)
     odom = h.send(scan_msg(2))
     np.testing.assert_allclose(pose_of(odom), target, atol=1e-6)
     odom = h.send(scan_msg(3))  # tracking goes on from there
-    trans_err, _ = pose_error(np.linalg.inv(POSES[2]) @ POSES[3], np.linalg.inv(target) @ pose_of(odom))
+    trans_err, _ = relative_error(np.linalg.inv(target) @ pose_of(odom), np.linalg.inv(POSES[2]) @ POSES[3])
     assert trans_err < 0.02
 
 
@@ -372,7 +239,7 @@ def test_pair_mode_with_a_latched_target(harness_factory, context):
     for k, pose in enumerate([make_transform(0.03, (0.8, -0.3, 0.0)), make_transform(0.05, (1.2, -0.2, 0.0))]):
         odom = h.send(scan_msg(k + 1, pose=pose), topic="source", timeout=FIRST_TIMEOUT)
         assert odom.header.frame_id == "map"
-        trans_err, rot_err = pose_error(pose, pose_of(odom))
+        trans_err, rot_err = relative_error(pose_of(odom), pose)
         assert trans_err < 0.02 and rot_err < 0.1, (k, trans_err, rot_err)
 
 
@@ -415,7 +282,7 @@ def test_odometry_is_the_base_frames_motion_given_an_extrinsic(harness_factory):
     for (ns, raw), T_published in zip(clouds, published):
         points = decode_xyz(store.deserialize_cdr(raw, "sensor_msgs/msg/PointCloud2"))[0]
         expected = T_bs @ aligner.process(points, ns).pose @ np.linalg.inv(T_bs)
-        trans_err, rot_err = pose_error(expected, T_published)
+        trans_err, rot_err = relative_error(T_published, expected)
         assert trans_err < 1e-3 and rot_err < 0.01, (trans_err, rot_err)
     assert np.linalg.norm(published[-1][:3, 3]) > 2.0  # the base moved (KITTI: ~0.8 m a scan)
 
@@ -471,7 +338,7 @@ def test_replay_bag_over_dds(harness_factory, bag):
     elapsed = time.monotonic() - started
     gt = [truth[ns] for ns, _ in clouds]
     gt = [np.linalg.inv(gt[0]) @ g for g in gt]
-    pair_errors = [pose_error(np.linalg.inv(gt[k - 1]) @ gt[k], np.linalg.inv(estimates[k - 1]) @ estimates[k])
+    pair_errors = [relative_error(np.linalg.inv(estimates[k - 1]) @ estimates[k], np.linalg.inv(gt[k - 1]) @ gt[k])
                    for k in range(1, len(gt))]
     ate = absolute_trajectory_error(estimates, gt)
     worst_t, worst_r = (max(e[i] for e in pair_errors) for i in (0, 1))

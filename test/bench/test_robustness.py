@@ -173,7 +173,7 @@ def test_config_checks_sizes_and_skips_kitti_without_data(tmp_path):
 
 def test_script_turns_its_flags_into_the_config():
     """The script's wiring, without a run: a size below 1 is refused with the flag's name (exit 2)."""
-    script = Path(__file__).resolve().parents[1] / "scripts" / "bench_robustness.py"
+    script = Path(__file__).resolve().parents[2] / "scripts" / "bench_robustness.py"
     done = subprocess.run([sys.executable, str(script), "--quick", "--pairs", "0"], capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 2 and "error: --pairs must be >= 1" in done.stderr

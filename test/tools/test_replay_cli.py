@@ -21,7 +21,7 @@ from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
 from cemnet_ros.schema import build
 from cemnet_ros.tools.replay_cli import load_params, main
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 BAGS = REPO / "bags"
 
 

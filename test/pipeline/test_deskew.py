@@ -61,7 +61,6 @@ def test_zero_velocity_or_zero_times_is_the_identity():
         deskew(points, np.zeros(50), T, 0.0)
 
 
-# -- time conventions ----------------------------------------------------------------------------------------
 OFFSETS = np.linspace(0.0, 0.0999, 7)  # s: a 10 Hz sweep
 
 
@@ -93,7 +92,6 @@ def test_normalize_point_times_sim_time_nonfinite_and_implausible():
         normalize_point_times(np.array(["a"]), STAMP_NS)
 
 
-# -- PointCloud2 ---------------------------------------------------------------------------------------------
 _NUMPY = {PointField.UINT32: "u4", PointField.FLOAT32: "f4", PointField.FLOAT64: "f8"}
 
 
@@ -164,7 +162,6 @@ def test_decode_point_times_without_a_time_field_or_with_a_bad_one():
     np.testing.assert_allclose(decode_point_times(msg, stamp_ns=50_000_000_000), 0.05, atol=1e-9)
 
 
-# -- the skewed sequence and the aligner --------------------------------------------------------------------
 SMALL_LIDAR = LidarModel(n_beams=16, n_azimuth=240)
 
 

@@ -2,16 +2,10 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.data.street import make_transform, make_world
+from cemnet_ros.bench.metrics import relative_error
+from cemnet_ros.data.street import make_transform, make_world, seen_from
 from cemnet_ros.pipeline.refine import point_to_plane_icp
 from cemnet_ros.pipeline.voxel_map import VoxelMap
-
-
-def pose_error(a, b):
-    """(m, deg) between two poses."""
-    err = np.linalg.inv(a) @ b
-    return float(np.linalg.norm(err[:3, 3])), float(np.degrees(np.linalg.norm(
-        Rotation.from_matrix(err[:3, :3]).as_rotvec())))
 
 
 def map_of(points, voxel_size=0.5, per_voxel=20):
@@ -20,9 +14,6 @@ def map_of(points, voxel_size=0.5, per_voxel=20):
     return voxel_map
 
 
-def seen_from(world, pose):
-    """``world`` in the frame of a sensor at ``pose`` (sensor -> world)."""
-    return (world - pose[:3, 3]) @ pose[:3, :3]
 
 
 def test_icp_removes_a_small_residual_error():
@@ -31,7 +22,7 @@ def test_icp_removes_a_small_residual_error():
     source = seen_from(world, truth)[::4]
     start = truth @ make_transform(yaw=np.radians(1.0), t=(0.08, 0.05, -0.03), roll=0.005)
     result = point_to_plane_icp(map_of(world), source, start, 1.0, 20)
-    before, after = pose_error(truth, start), pose_error(truth, result.T_target_source)
+    before, after = relative_error(start, truth), relative_error(result.T_target_source, truth)
     assert after[0] < 0.005 and after[1] < 0.02, (before, after)
     assert 0 < result.iterations < 20 and result.n_pairs > 4000 and result.residual_variance < 1e-4
 

@@ -1,0 +1,54 @@
+"""Scan preprocessing: finite points, range crop, voxel centroids, subsets, robust radius."""
+import numpy as np
+import pytest
+
+from cemnet_ros.pipeline.preprocess import (
+    crop_range,
+    farthest_point_indices,
+    finite_points,
+    robust_radius,
+    subsample,
+    voxel_downsample,
+)
+
+
+def test_finite_and_crop():
+    pts = np.array([[1, 0, 0], [np.nan, 0, 0], [5, 0, 0], [0, 20, 0], [0, 0, np.inf]], dtype=float)
+    fin = finite_points(pts)
+    assert len(fin) == 3
+    np.testing.assert_array_equal(crop_range(fin, 2.0, 10.0), [[5, 0, 0]])
+    np.testing.assert_array_equal(crop_range(fin, 0.0, 0.0), fin)
+    with pytest.raises(ValueError):
+        finite_points(np.zeros((3, 2)))
+
+
+def test_voxel_downsample_takes_centroids():
+    pts = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [1.5, 0.2, 0.2], [-0.5, 0.5, 0.5]])
+    out = voxel_downsample(pts, 1.0)
+    expected = np.array([[-0.5, 0.5, 0.5], [0.2, 0.2, 0.2], [1.5, 0.2, 0.2]])
+    np.testing.assert_allclose(out[np.lexsort(out.T[::-1])], expected[np.lexsort(expected.T[::-1])])
+    np.testing.assert_array_equal(voxel_downsample(pts, 0.0), pts)
+
+
+def test_subsample_is_seeded_and_farthest_spreads():
+    pts = np.random.default_rng(0).normal(size=(500, 3))
+    a, b = subsample(pts, 50, "random", seed=3), subsample(pts, 50, "random", seed=3)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, subsample(pts, 50, "random", seed=4))
+    assert len(subsample(pts[:10], 50)) == 10
+    # Farthest-point sampling of two tight clusters picks from both at once.
+    clusters = np.vstack([np.zeros((100, 3)), np.full((100, 3), 10.0)]) + np.random.default_rng(1).normal(
+        scale=0.01, size=(200, 3))
+    idx = farthest_point_indices(clusters, 2)
+    assert (idx < 100).sum() == 1
+    with pytest.raises(ValueError):
+        subsample(pts, 10, "bogus")
+
+
+def test_robust_radius_ignores_outliers():
+    pts = np.random.default_rng(0).uniform(-1, 1, (5000, 3)) + 50.0
+    clean = robust_radius(pts)
+    assert 0.9 < clean < 1.5
+    assert robust_radius(np.vstack([pts, np.full((20, 3), 1e6)])) == pytest.approx(clean, rel=0.05)
+    with pytest.raises(ValueError):
+        robust_radius(np.zeros((0, 3)))
