@@ -1,4 +1,4 @@
-"""Training data: registration pairs made on the fly from shapes or from a folder of scans.
+"""Training data: registration pairs made on the fly from shapes, a folder of scans or a bag (:mod:`.scan_pairs`).
 
 Every pair comes from the evaluation protocol's :func:`make_pair` (random pose, partial crop, optional noise),
 seeded by ``(seed, epoch, index)``: each epoch sees new poses, yet any run is reproducible and a resumed
@@ -17,7 +17,9 @@ from tqdm import tqdm
 from cemnet_ros.eval.protocol import ProtocolConfig, load_shapes, make_pair
 from cemnet_ros.io.pointcloud_files import read_points
 
+from .bag_scans import read_bag_scans, split_in_time
 from .config import TrainConfig
+from .scan_pairs import ScanPairDataset
 
 SCAN_SUFFIXES = (".ply", ".pcd", ".npy", ".npz", ".bin")
 _VAL_EPOCH = -1  # the "epoch" that seeds validation pairs, so they never change
@@ -118,9 +120,13 @@ def _limit(indices: np.ndarray, limit: int) -> np.ndarray:
     return indices[:limit] if limit > 0 else indices
 
 
-def build_datasets(config: TrainConfig) -> tuple[PairDataset, PairDataset]:
-    """(train, val) pair datasets from ``config.data``: validation holds out shapes of the *train* split
-    (the test split stays untouched for the final evaluation)."""
+def build_datasets(config: TrainConfig) -> tuple[PairDataset | ScanPairDataset, PairDataset | ScanPairDataset]:
+    """(train, val) pair datasets from ``config.data`` or ``config.bag``: validation holds out shapes of the
+    *train* split (the test split stays untouched for the final evaluation), or the last scans of the bag."""
+    if config.bag:
+        return build_bag_datasets(config)
+    if not config.data:
+        raise ValueError("nothing to train on: give data (an .npz of shapes or a folder of scans) or bag")
     path = Path(config.data)
     if path.is_dir():
         shapes, _ = load_scan_shapes(path, config.protocol.n_points, config.seed, config.progress)
@@ -136,3 +142,12 @@ def build_datasets(config: TrainConfig) -> tuple[PairDataset, PairDataset]:
     return (PairDataset(shapes[train_idx], config.protocol, config.seed),
             PairDataset(shapes[val_idx], config.protocol, config.seed, fixed=True))
 
+
+
+def build_bag_datasets(config: TrainConfig) -> tuple[ScanPairDataset, ScanPairDataset]:
+    """(train, val) scan pairs of ``config.bag`` in the node's units; validation holds out the last scans."""
+    scans = read_bag_scans(config.bag, config.topic, config.preprocess, config.progress)
+    train_idx, val_idx = split_in_time(len(scans), config.val_fraction)
+    train_idx, val_idx = _limit(train_idx, config.limit_train), _limit(val_idx, config.limit_val)
+    return (ScanPairDataset(scans.part(train_idx), config.preprocess, config.scans, config.seed),
+            ScanPairDataset(scans.part(val_idx), config.preprocess, config.scans, config.seed, fixed=True))
