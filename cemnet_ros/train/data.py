@@ -1,8 +1,9 @@
 """Training data: registration pairs made on the fly from shapes, a folder of scans or a bag (:mod:`.scan_pairs`).
 
-Every pair comes from the evaluation protocol's :func:`make_pair` (random pose, partial crop, optional noise),
-seeded by ``(seed, epoch, index)``: each epoch sees new poses, yet any run is reproducible and a resumed
-run draws exactly the pairs the uninterrupted run would have drawn. Validation pairs ignore the epoch.
+Every shape pair comes from the evaluation protocol's :func:`make_pair` (random pose, partial crop, optional
+noise), seeded by ``(seed, epoch, index)`` (:mod:`.seeded_pairs`): each epoch sees new poses, yet any run is
+reproducible and a resumed run draws exactly the pairs the uninterrupted run would have drawn. Validation pairs
+ignore the epoch.
 """
 from __future__ import annotations
 
@@ -11,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.data import Dataset
 from tqdm import tqdm
 
 from cemnet_ros.eval.protocol import ProtocolConfig, load_shapes, make_pair
@@ -20,17 +20,15 @@ from cemnet_ros.io.pointcloud_files import read_points
 from .bag_scans import read_bag_scans, split_in_time
 from .config import TrainConfig
 from .scan_pairs import ScanPairDataset
+from .seeded_pairs import SeededPairs, pair_item
 
 SCAN_SUFFIXES = (".ply", ".pcd", ".npy", ".npz", ".bin")
-_VAL_EPOCH = -1  # the "epoch" that seeds validation pairs, so they never change
-
-
-class PairDataset(Dataset):
-    """Pairs from ``shapes`` (S, n, 3): item i of epoch e uses ``default_rng([seed, e + 1, i])``
-    (validation, ``fixed``: e = -1 always). Items: source, target (n, 3) float32; true rotation (3, 3) and
-    translation (3,) float64 with ``target ~= R source + t``."""
+class PairDataset(SeededPairs):
+    """Pairs from ``shapes`` (S, n, 3) by the evaluation protocol, seeded as :class:`SeededPairs` says; items as
+    :func:`pair_item` makes them."""
 
     def __init__(self, shapes: np.ndarray, protocol: ProtocolConfig, seed: int, fixed: bool = False):
+        super().__init__(seed, fixed)
         shapes = np.asarray(shapes, dtype=np.float32)
         if shapes.ndim != 3 or shapes.shape[2] != 3 or len(shapes) == 0:
             raise ValueError(f"shapes must be a non-empty (S, n, 3) array, got {shapes.shape}")
@@ -38,27 +36,13 @@ class PairDataset(Dataset):
             raise ValueError("shapes contain NaN/inf coordinates")
         self.shapes = shapes
         self.protocol = protocol
-        self.seed = int(seed)
-        self.fixed = fixed  # validation: the same pairs every epoch
-        self.epoch = 0
-
-    def set_epoch(self, epoch: int) -> None:
-        """Select the poses of ``epoch`` (call before iterating; DataLoader workers see it at fork)."""
-        self.epoch = int(epoch)
 
     def __len__(self) -> int:
         return len(self.shapes)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        epoch = _VAL_EPOCH if self.fixed else self.epoch
-        rng = np.random.default_rng([self.seed, epoch + 1, int(index)])
-        pair = make_pair(self.shapes[index], rng, self.protocol)
-        return {
-            "source": torch.as_tensor(pair.source, dtype=torch.float32),
-            "target": torch.as_tensor(pair.target, dtype=torch.float32),
-            "rotation": torch.as_tensor(pair.rotation, dtype=torch.float64),
-            "translation": torch.as_tensor(pair.translation, dtype=torch.float64),
-        }
+        pair = make_pair(self.shapes[index], self.rng(index), self.protocol)
+        return pair_item(pair.source, pair.target, pair.rotation, pair.translation)
 
 
 def normalise_unit_sphere(points: np.ndarray) -> np.ndarray:

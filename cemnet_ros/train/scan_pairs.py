@@ -1,8 +1,8 @@
 """Training pairs from the scans of a bag, in the node's units: what the recovery meets, with known truth when
 the bag has ground truth.
 
-Pair i of epoch e is drawn from ``default_rng([seed, e + 1, i])`` (validation: e = -1 always), as the shape
-pairs of :mod:`.data`: every epoch brings new motions, crops and subsets, yet every run draws the same ones.
+Pairs are seeded by (seed, epoch, index) as the shape pairs (:mod:`.seeded_pairs`): every epoch brings new
+motions, crops and subsets, yet every run draws the same ones.
 """
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from typing import Optional
 
 import numpy as np
 import torch
-from torch.utils.data import Dataset
 
 from cemnet_ros.core.geometry import action_to_matrix_np, apply_transform
 from cemnet_ros.core.global_search import scatter
@@ -21,8 +20,8 @@ from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig
 from .bag_scans import ScanSet
 from .config import ScanPairConfig
 from .scan_prep import cem_cloud, network_units
+from .seeded_pairs import SeededPairs, pair_item
 
-_VAL_EPOCH = -1  # the "epoch" that seeds validation pairs, so they never change
 _ONE_CANDIDATE = dataclasses.replace(RecoveryConfig().search, n_scatter=1, n_hypotheses=1, n_seeds=1)  # its scatter
 
 
@@ -58,35 +57,25 @@ def exactly(points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([points, points[rng.integers(0, len(points), n - len(points))]])
 
 
-class ScanPairDataset(Dataset):
+class ScanPairDataset(SeededPairs):
     """Pairs of a :class:`ScanSet`. Items: source, target (n, 3) float32 in network units; rotation (3, 3) and
     translation (3,) float64 with ``target ~= R source + t`` (NaN when the bag has no ground truth for a pair of
     two scans; validation, ``fixed``, then pairs each scan with itself only)."""
 
     def __init__(self, scans: ScanSet, preprocess: PreprocessConfig, pairs: ScanPairConfig, seed: int,
                  fixed: bool = False):
+        super().__init__(seed, fixed)
         if len(scans) == 0:
             raise ValueError("no scans to make pairs from")
         self.scans, self.preprocess, self.pairs = scans, preprocess, pairs
-        self.seed = int(seed)
-        self.fixed = fixed  # validation: the same pairs every epoch
-        self.epoch = 0
-
-    def set_epoch(self, epoch: int) -> None:
-        """Select the pairs of ``epoch`` (call before iterating; DataLoader workers see it at fork)."""
-        self.epoch = int(epoch)
 
     def __len__(self) -> int:
         return len(self.scans)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        epoch = _VAL_EPOCH if self.fixed else self.epoch
-        pair = self.pair(int(index), np.random.default_rng([self.seed, epoch + 1, int(index)]))
+        pair = self.pair(int(index), self.rng(index))
         truth = np.full((4, 4), np.nan) if pair.T_target_source is None else pair.T_target_source
-        return {"source": torch.as_tensor(pair.source, dtype=torch.float32),
-                "target": torch.as_tensor(pair.target, dtype=torch.float32),
-                "rotation": torch.as_tensor(truth[:3, :3], dtype=torch.float64),
-                "translation": torch.as_tensor(truth[:3, 3], dtype=torch.float64)}
+        return pair_item(pair.source, pair.target, truth[:3, :3], truth[:3, 3])
 
     def pair(self, index: int, rng: np.random.Generator) -> ScanPair:
         """Scan ``index`` as the target; the source is a scan up to ``max_gap`` away or the same one, moved by a
