@@ -23,6 +23,8 @@ from .scan_pairs import ScanPairDataset
 from .seeded_pairs import SeededPairs, pair_item
 
 SCAN_SUFFIXES = (".ply", ".pcd", ".npy", ".npz", ".bin")
+
+
 class PairDataset(SeededPairs):
     """Pairs from ``shapes`` (S, n, 3) by the evaluation protocol, seeded as :class:`SeededPairs` says; items as
     :func:`pair_item` makes them."""
@@ -125,7 +127,6 @@ def build_datasets(config: TrainConfig) -> tuple[PairDataset | ScanPairDataset, 
     train_idx, val_idx = _limit(train_idx, config.limit_train), _limit(val_idx, config.limit_val)
     return (PairDataset(shapes[train_idx], config.protocol, config.seed),
             PairDataset(shapes[val_idx], config.protocol, config.seed, fixed=True))
-
 
 
 def build_bag_datasets(config: TrainConfig) -> tuple[ScanPairDataset, ScanPairDataset]:
