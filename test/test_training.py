@@ -305,8 +305,8 @@ def test_cli_rejects_bad_input(tmp_path, capsys):
     assert train_cli.main(["--data", str(tmp_path / "missing.npz"), "--out", str(tmp_path / "o"),
                            "--no-progress"]) == 2
     assert "missing.npz" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        train_cli.main(["--out", str(tmp_path)])  # --data is required
+    assert train_cli.main(["--out", str(tmp_path), "--no-progress"]) == 2  # neither --data nor --bag
+    assert "--bag" in capsys.readouterr().err
 
 
 def test_cli_flags_come_from_the_schema_and_override_the_preset(tmp_path):

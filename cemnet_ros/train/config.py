@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
+from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig, odometry_registration
 from cemnet_ros.schema import build, param, section
 
 BEST_METRICS = ("val_mae_r_deg", "val_prior_mae_r_deg", "val_loss")
@@ -25,10 +26,43 @@ def _train_cem() -> CEMConfig:
 
 
 @dataclass
+class ScanPairConfig:
+    """How training pairs are made from the scans of a bag: the situations the node's recovery searches.
+
+    A pair is a scan and the scan ``1..max_gap`` later (share ``consecutive``) or the scan and itself; each cloud
+    loses a random azimuth sector, gets its own subset and noise, and the source is moved by a random rigid
+    motion drawn as the node's recovery scatters its candidates (yaw over the full circle, translation on a disc
+    of ``radius`` metres, roll, pitch and height spread as its default ``recovery.search``).
+    """
+
+    n_points: int = param(odometry_registration().n_points, "points per cloud (the node's registration.n_points)",
+                          low=32)
+    consecutive: float = param(0.5, "share of pairs made of two scans (the rest pair a scan with itself)",
+                               low=0.0, high=1.0)
+    max_gap: int = param(1, "a consecutive pair's scans are at most this many scans apart", low=1)
+    radius: float = param(RecoveryConfig().radius, "random motion: translation uniform on a disc of this radius "
+                          "(m; the node's recovery.radius), yaw uniform over the full circle", low=0.0)
+    crop_deg: float = param(90.0, "partial crop: each cloud loses a random azimuth sector of up to this many "
+                            "degrees", low=0.0, high=360.0)
+    noise: float = param(0.02, "Gaussian noise (m) added to every coordinate of both clouds", low=0.0)
+
+    def __post_init__(self) -> None:
+        if self.n_points < 32 or self.max_gap < 1:
+            raise ValueError("scans.n_points must be >= 32 and scans.max_gap >= 1")
+        if not 0.0 <= self.consecutive <= 1.0 or not 0.0 <= self.crop_deg <= 360.0:
+            raise ValueError("scans.consecutive must lie in [0, 1] and scans.crop_deg in [0, 360]")
+        if self.radius < 0 or self.noise < 0:
+            raise ValueError("scans.radius and scans.noise must be >= 0")
+
+
+@dataclass
 class TrainConfig:
     """Everything :class:`cemnet_ros.train.trainer.Trainer` needs."""
 
     data: str = param("", "an .npz of shapes (points (S, n, 3) [+ labels, split]) or a folder of scans")
+    bag: str = param("", "instead of data: a rosbag2 bag (.mcap/.db3 file or folder) of PointCloud2 scans, "
+                     "trained on in the node's units")
+    topic: str = param("", "the bag's PointCloud2 topic; '' = its only one")
     out_dir: str = param("results/train", "output folder (checkpoints, log.csv, curves.png, config.json)")
     # Optimisation.
     epochs: int = param(50, "training epochs (paper: 50)", low=1)
@@ -53,6 +87,9 @@ class TrainConfig:
     # Data: pairs follow the evaluation protocol (random pose, partial crop, optional noise).
     protocol: ProtocolConfig = section(ProtocolConfig, "how training/validation pairs are made (the evaluation "
                                        "protocol: random pose, partial crop, optional noise)")
+    preprocess: PreprocessConfig = section(PreprocessConfig, "bag: the node's preprocessing (range crop, voxel "
+                                           "grid, CEM radius, scale = metres per network unit)")
+    scans: ScanPairConfig = section(ScanPairConfig, "bag: how pairs are made from its scans")
     unseen: bool = param(False, "npz only: train on categories 0-19 (the unseen-category split)")
     val_fraction: float = param(0.1, "share of the training shapes/scans held out for validation, in (0, 1)")
     limit_train: int = param(0, "use at most this many training shapes; 0 = all", low=0)
@@ -99,6 +136,8 @@ class TrainConfig:
             raise ValueError("threads must be >= 0 (0 = torch default)")
         if self.num_workers < 0:
             raise ValueError("num_workers must be >= 0")
+        if self.data and self.bag:
+            raise ValueError("give data (shapes or a folder of scans) or bag, not both")
 
 
 # A CPU hour holds few paper-size batches (32 pairs, N = 1000; timings in docs/training.md): the CPU preset takes

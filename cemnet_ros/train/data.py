@@ -1,8 +1,9 @@
-"""Training data: registration pairs made on the fly from shapes or from a folder of scans.
+"""Training data: registration pairs made on the fly from shapes, a folder of scans or a bag (:mod:`.scan_pairs`).
 
-Every pair comes from the evaluation protocol's :func:`make_pair` (random pose, partial crop, optional noise),
-seeded by ``(seed, epoch, index)``: each epoch sees new poses, yet any run is reproducible and a resumed
-run draws exactly the pairs the uninterrupted run would have drawn. Validation pairs ignore the epoch.
+Every shape pair comes from the evaluation protocol's :func:`make_pair` (random pose, partial crop, optional
+noise), seeded by ``(seed, epoch, index)`` (:mod:`.seeded_pairs`): each epoch sees new poses, yet any run is
+reproducible and a resumed run draws exactly the pairs the uninterrupted run would have drawn. Validation pairs
+ignore the epoch.
 """
 from __future__ import annotations
 
@@ -11,24 +12,25 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch.utils.data import Dataset
 from tqdm import tqdm
 
 from cemnet_ros.eval.protocol import ProtocolConfig, load_shapes, make_pair
 from cemnet_ros.io.pointcloud_files import read_points
 
+from .bag_scans import read_bag_scans, split_in_time
 from .config import TrainConfig
+from .scan_pairs import ScanPairDataset
+from .seeded_pairs import SeededPairs, pair_item
 
 SCAN_SUFFIXES = (".ply", ".pcd", ".npy", ".npz", ".bin")
-_VAL_EPOCH = -1  # the "epoch" that seeds validation pairs, so they never change
 
 
-class PairDataset(Dataset):
-    """Pairs from ``shapes`` (S, n, 3): item i of epoch e uses ``default_rng([seed, e + 1, i])``
-    (validation, ``fixed``: e = -1 always). Items: source, target (n, 3) float32; true rotation (3, 3) and
-    translation (3,) float64 with ``target ~= R source + t``."""
+class PairDataset(SeededPairs):
+    """Pairs from ``shapes`` (S, n, 3) by the evaluation protocol, seeded as :class:`SeededPairs` says; items as
+    :func:`pair_item` makes them."""
 
     def __init__(self, shapes: np.ndarray, protocol: ProtocolConfig, seed: int, fixed: bool = False):
+        super().__init__(seed, fixed)
         shapes = np.asarray(shapes, dtype=np.float32)
         if shapes.ndim != 3 or shapes.shape[2] != 3 or len(shapes) == 0:
             raise ValueError(f"shapes must be a non-empty (S, n, 3) array, got {shapes.shape}")
@@ -36,27 +38,13 @@ class PairDataset(Dataset):
             raise ValueError("shapes contain NaN/inf coordinates")
         self.shapes = shapes
         self.protocol = protocol
-        self.seed = int(seed)
-        self.fixed = fixed  # validation: the same pairs every epoch
-        self.epoch = 0
-
-    def set_epoch(self, epoch: int) -> None:
-        """Select the poses of ``epoch`` (call before iterating; DataLoader workers see it at fork)."""
-        self.epoch = int(epoch)
 
     def __len__(self) -> int:
         return len(self.shapes)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        epoch = _VAL_EPOCH if self.fixed else self.epoch
-        rng = np.random.default_rng([self.seed, epoch + 1, int(index)])
-        pair = make_pair(self.shapes[index], rng, self.protocol)
-        return {
-            "source": torch.as_tensor(pair.source, dtype=torch.float32),
-            "target": torch.as_tensor(pair.target, dtype=torch.float32),
-            "rotation": torch.as_tensor(pair.rotation, dtype=torch.float64),
-            "translation": torch.as_tensor(pair.translation, dtype=torch.float64),
-        }
+        pair = make_pair(self.shapes[index], self.rng(index), self.protocol)
+        return pair_item(pair.source, pair.target, pair.rotation, pair.translation)
 
 
 def normalise_unit_sphere(points: np.ndarray) -> np.ndarray:
@@ -118,9 +106,13 @@ def _limit(indices: np.ndarray, limit: int) -> np.ndarray:
     return indices[:limit] if limit > 0 else indices
 
 
-def build_datasets(config: TrainConfig) -> tuple[PairDataset, PairDataset]:
-    """(train, val) pair datasets from ``config.data``: validation holds out shapes of the *train* split
-    (the test split stays untouched for the final evaluation)."""
+def build_datasets(config: TrainConfig) -> tuple[PairDataset | ScanPairDataset, PairDataset | ScanPairDataset]:
+    """(train, val) pair datasets from ``config.data`` or ``config.bag``: validation holds out shapes of the
+    *train* split (the test split stays untouched for the final evaluation), or the last scans of the bag."""
+    if config.bag:
+        return build_bag_datasets(config)
+    if not config.data:
+        raise ValueError("nothing to train on: give data (an .npz of shapes or a folder of scans) or bag")
     path = Path(config.data)
     if path.is_dir():
         shapes, _ = load_scan_shapes(path, config.protocol.n_points, config.seed, config.progress)
@@ -136,3 +128,11 @@ def build_datasets(config: TrainConfig) -> tuple[PairDataset, PairDataset]:
     return (PairDataset(shapes[train_idx], config.protocol, config.seed),
             PairDataset(shapes[val_idx], config.protocol, config.seed, fixed=True))
 
+
+def build_bag_datasets(config: TrainConfig) -> tuple[ScanPairDataset, ScanPairDataset]:
+    """(train, val) scan pairs of ``config.bag`` in the node's units; validation holds out the last scans."""
+    scans = read_bag_scans(config.bag, config.topic, config.preprocess, config.progress)
+    train_idx, val_idx = split_in_time(len(scans), config.val_fraction)
+    train_idx, val_idx = _limit(train_idx, config.limit_train), _limit(val_idx, config.limit_val)
+    return (ScanPairDataset(scans.part(train_idx), config.preprocess, config.scans, config.seed),
+            ScanPairDataset(scans.part(val_idx), config.preprocess, config.scans, config.seed, fixed=True))

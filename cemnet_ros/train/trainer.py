@@ -9,9 +9,7 @@ and ``config.json`` in ``config.out_dir``.
 from __future__ import annotations
 
 import csv
-import io
 import json
-import math
 import time
 import warnings
 from dataclasses import asdict
@@ -30,16 +28,14 @@ from cemnet_ros.core.geometry_torch import action_to_rt, transform_points
 from cemnet_ros.core.losses import geman_mcclure_loss
 from cemnet_ros.core.network import SamplingNetwork
 from cemnet_ros.eval.metrics import aggregate, pair_metrics
-from cemnet_ros.io.atomic import atomic_write_bytes, atomic_write_text
+from cemnet_ros.io.atomic import atomic_write_text
 
 from . import distributed as ddp
 from .checkpoints import load_checkpoint, save_checkpoint
 from .config import TrainConfig, epoch_learning_rate
 from .data import build_datasets
+from .outputs import CSV_FIELDS, fmt, write_curves, write_log
 
-CSV_FIELDS = ("epoch", "global_step", "train_loss", "train_loss_final", "train_loss_prior", "skipped_batches",
-              "val_loss", "val_mae_r_deg", "val_mae_t", "val_recall", "val_prior_mae_r_deg", "val_prior_mae_t",
-              "lr", "train_time_s", "val_time_s", "best")
 CHECKPOINT_FORMAT = "cemnet_ros.train/1"
 
 
@@ -251,13 +247,13 @@ class Trainer:
         row["best"] = int(improved)
         # Log first: a resume keeps only the rows up to its checkpoint's epoch, so a crash in between is harmless.
         self.rows.append({k: row.get(k, "") for k in CSV_FIELDS})
-        self._write_log()
-        self._write_curves()
+        write_log(self.out_dir, self.rows)
+        write_curves(self.out_dir, self.rows)
         meta = self._meta(row)
         if improved:
             save_checkpoint(self.out_dir / "best.npz", self.network, None, meta)
         save_checkpoint(self.out_dir / "last.npz", self.network, self.optimizer, meta)
-        summary = ", ".join(f"{k}={_fmt(row[k])}" for k in ("train_loss", "val_mae_r_deg", "val_mae_t", "val_recall",
+        summary = ", ".join(f"{k}={fmt(row[k])}" for k in ("train_loss", "val_mae_r_deg", "val_mae_t", "val_recall",
                                                           "val_prior_mae_r_deg", "train_time_s", "val_time_s")
                             if k in row)
         print(f"epoch {row['epoch']}/{self.config.epochs}: {summary}", flush=True)
@@ -267,43 +263,3 @@ class Trainer:
                 "best": self.best, "metrics": {k: v for k, v in row.items() if k != "epoch"},
                 "train_config": json.loads(json.dumps(asdict(self.config), default=str)),
                 "torch": torch.__version__, "created_unix": time.time()}
-
-    def _write_log(self) -> None:
-        text = io.StringIO()
-        writer = csv.DictWriter(text, fieldnames=CSV_FIELDS, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows({k: _fmt(row.get(k, "")) for k in CSV_FIELDS} for row in self.rows)
-        atomic_write_text(self.out_dir / "log.csv", text.getvalue())
-
-    def _write_curves(self) -> None:
-        import matplotlib
-        matplotlib.use("Agg")
-        from matplotlib import pyplot as plt
-
-        def series(key: str) -> tuple[list[int], list[float]]:
-            pts = [(int(r["epoch"]), float(r[key])) for r in self.rows if r.get(key) not in ("", None)]
-            return [p[0] for p in pts], [p[1] for p in pts]
-
-        fig, (ax_loss, ax_val) = plt.subplots(1, 2, figsize=(11, 4))
-        for key, label in (("train_loss", "total"), ("train_loss_final", "final (mu_T)"),
-                           ("train_loss_prior", "prior (mu_0)"), ("val_loss", "val final")):
-            ax_loss.plot(*series(key), marker=".", label=label)
-        ax_loss.set(xlabel="epoch", ylabel="Geman-McClure loss", title="training loss")
-        ax_loss.legend()
-        for key, label in (("val_mae_r_deg", "CEM (mu_T)"), ("val_prior_mae_r_deg", "prior (mu_0)")):
-            ax_val.plot(*series(key), marker=".", label=label)
-        ax_val.set(xlabel="epoch", ylabel="MAE(R) [deg]", title="validation")
-        ax_val.legend(loc="upper left")
-        ax_recall = ax_val.twinx()
-        ax_recall.plot(*series("val_recall"), color="tab:green", linestyle="--", marker=".", label="recall")
-        ax_recall.set(ylabel="recall", ylim=(0.0, 1.05))
-        ax_recall.legend(loc="upper right")
-        fig.tight_layout()
-        buffer = io.BytesIO()
-        fig.savefig(buffer, format="png", dpi=100)
-        plt.close(fig)
-        atomic_write_bytes(self.out_dir / "curves.png", buffer.getvalue())
-
-
-def _fmt(value: Any) -> Any:
-    return f"{value:.6g}" if isinstance(value, float) and math.isfinite(value) else value
