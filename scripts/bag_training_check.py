@@ -124,7 +124,7 @@ def registered(registration: RegistrationConfig, sources: torch.Tensor, targets:
     registrar = Registrar(registration)
     parts = [registrar.register_batch(sources[i:i + chunk], targets[i:i + chunk], run_cem=run_cem)
              for i in range(0, len(sources), chunk)]
-    return {key: np.concatenate([part[key] for part in parts]) for key in ("rotation", "translation")}
+    return {key: np.concatenate([getattr(part, key) for part in parts]) for key in ("rotation", "translation")}
 
 
 def evaluate(priors: dict[str, RegistrationConfig], bag: Path, seed: int) -> list[dict]:

@@ -12,7 +12,7 @@ from typing import Optional
 
 import numpy as np
 
-from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig
 from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
 from cemnet_ros.pipeline.voxel_map import VoxelMap
@@ -46,11 +46,53 @@ class Frame:
         return self.voxel if self.voxel > 0 else self.scale / 100.0
 
     def network_units(self, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(to_units, from_units): 4x4 maps between metres and network units centred on ``centre`` (3,)."""
-        to_units = np.eye(4)
-        to_units[:3, :3] /= self.scale
-        to_units[:3, 3] = -np.asarray(centre) / self.scale
-        return to_units, np.linalg.inv(to_units)
+        """(to_units, from_units) at this frame's scale, centred on ``centre`` (3,) m."""
+        return network_units(self.scale, centre)
+
+
+def cropped(points: np.ndarray, config: PreprocessConfig) -> np.ndarray:
+    """Finite points within the range crop (m, sensor frame); ScanRejected when fewer than ``min_points`` remain."""
+    kept = crop_range(finite_points(points), config.min_range, config.max_range)
+    if len(kept) < config.min_points:
+        raise ScanRejected(f"too few points: {len(kept)} after range crop, need {config.min_points}",
+                           "too_few_points")
+    return kept
+
+
+def measured_scale(points_cropped: np.ndarray) -> float:
+    """The auto scale (metres per network unit) of a cropped scan: its robust radius."""
+    scale = robust_radius(points_cropped)
+    if not scale > 0:
+        raise ScanRejected("degenerate cloud: all points coincide, cannot measure its scale", "degenerate")
+    return scale
+
+
+def voxel_size(config: PreprocessConfig, scale: float) -> float:
+    """The frame voxel (m): ``config.voxel_size``, 0 = auto (scale / 100), negative = no voxel grid (0)."""
+    return max(config.voxel_size if config.voxel_size != 0 else scale / 100.0, 0.0)
+
+
+def voxel_cloud(points_cropped: np.ndarray, config: PreprocessConfig, voxel: float) -> np.ndarray:
+    """The voxel cloud of a cropped scan (the map's points, :attr:`Frame.dense`); ScanRejected when too few."""
+    dense = voxel_downsample(points_cropped, voxel)
+    if len(dense) < config.min_points:
+        raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {config.min_points}",
+                           "too_few_points")
+    return dense
+
+
+def near_points(dense: np.ndarray, config: PreprocessConfig, scale: float) -> np.ndarray:
+    """The voxel points within the CEM's radius of the sensor (all of them when fewer than ``min_points`` are)."""
+    near = dense[np.einsum("ij,ij->i", dense, dense) <= (config.cem_radius * scale) ** 2]
+    return near if len(near) >= config.min_points else dense
+
+
+def network_units(scale: float, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(to_units, from_units): 4x4 maps between metres and network units centred on ``centre`` (3,) m."""
+    to_units = np.eye(4)
+    to_units[:3, :3] /= scale
+    to_units[:3, 3] = -np.asarray(centre) / scale
+    return to_units, np.linalg.inv(to_units)
 
 
 class Preprocessor:
@@ -72,23 +114,14 @@ class Preprocessor:
         Raises ScanRejected.
         """
         cfg = self.config.preprocess
-        cropped = crop_range(finite_points(points), cfg.min_range, cfg.max_range)
-        if len(cropped) < cfg.min_points:
-            raise ScanRejected(f"too few points: {len(cropped)} after range crop, need {cfg.min_points}",
-                               "too_few_points")
+        kept = cropped(points, cfg)
         scale = self.scale if scale is None else scale
         if scale is None:
-            scale = robust_radius(cropped)
-            if not scale > 0:
-                raise ScanRejected("degenerate cloud: all points coincide, cannot measure its scale", "degenerate")
-        voxel = max(cfg.voxel_size if cfg.voxel_size != 0 else scale / 100.0, 0.0)
-        dense = voxel_downsample(cropped, voxel)
-        if len(dense) < cfg.min_points:
-            raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {cfg.min_points}",
-                               "too_few_points")
+            scale = measured_scale(kept)
+        voxel = voxel_size(cfg, scale)
+        dense = voxel_cloud(kept, cfg, voxel)
+        near = near_points(dense, cfg, scale)
         seed = max(self.config.registration.seed, 0)
-        near = dense[np.einsum("ij,ij->i", dense, dense) <= (cfg.cem_radius * scale) ** 2]
-        near = near if len(near) >= cfg.min_points else dense
         return Frame(dense, subsample(dense, self.config.polish.points, "random", seed),
                      subsample(near, self.config.registration.n_points, cfg.sampling, seed), near, scale, voxel)
 

@@ -16,10 +16,9 @@ import numpy as np
 from tqdm import tqdm
 
 from cemnet_ros.pipeline.config import PreprocessConfig
+from cemnet_ros.pipeline.frame import cropped, measured_scale, voxel_cloud, voxel_size
 from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.replay.bag_io import BagReader, SkippedMessage
-
-from .scan_prep import auto_scale, voxel_cloud
 
 
 @dataclass
@@ -60,8 +59,9 @@ def read_bag_scans(path: str | os.PathLike, topic: str, config: PreprocessConfig
                 warnings.warn(f"skipping {item.topic} message {item.index}: {item.reason}")
                 continue
             try:
-                item_scale = scale if scale is not None else auto_scale(item.points, config)
-                clouds.append(voxel_cloud(item.points, config, item_scale).astype(np.float32))
+                kept = cropped(item.points, config)
+                item_scale = scale if scale is not None else config.scale if config.scale > 0 else measured_scale(kept)
+                clouds.append(voxel_cloud(kept, config, voxel_size(config, item_scale)).astype(np.float32))
             except ScanRejected as err:
                 warnings.warn(f"skipping {reader.info.cloud_topic} message {item.index}: {err}")
                 continue

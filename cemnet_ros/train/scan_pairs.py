@@ -16,10 +16,11 @@ import torch
 from cemnet_ros.core.geometry import action_to_matrix_np, apply_transform
 from cemnet_ros.core.global_search import scatter
 from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig
+from cemnet_ros.pipeline.frame import near_points, network_units
+from cemnet_ros.pipeline.preprocess import subsample
 
 from .bag_scans import ScanSet
 from .config import ScanPairConfig
-from .scan_prep import cem_cloud, network_units
 from .seeded_pairs import SeededPairs, pair_item
 
 _ONE_CANDIDATE = dataclasses.replace(RecoveryConfig().search, n_scatter=1, n_hypotheses=1, n_seeds=1)  # its scatter
@@ -106,5 +107,6 @@ class ScanPairDataset(SeededPairs):
         """Scan ``index`` (m, sensor frame): a sector dropped, the CEM's points (as many as the node takes), noise."""
         cfg, n = self.preprocess, self.pairs.n_points
         partial = drop_sector(self.scans.clouds[index], rng, self.pairs.crop_deg, cfg.min_points)
-        points = exactly(cem_cloud(partial, cfg, self.scans.scale, n, int(rng.integers(1 << 31))), n, rng)
+        near = near_points(partial, cfg, self.scans.scale)
+        points = exactly(subsample(near, n, cfg.sampling, int(rng.integers(1 << 31))), n, rng)
         return points + rng.normal(0.0, self.pairs.noise, points.shape)

@@ -18,15 +18,14 @@ from cemnet_ros.core.checkpoint import load_network
 from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.core.geometry import apply_transform, matrix_to_action_np
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory
-from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.frame import Preprocessor
 from cemnet_ros.replay.bag_io import BagWriter
 from cemnet_ros.tools import train_cli
 from cemnet_ros.train.config import ScanPairConfig, TrainConfig
 from cemnet_ros.train.data import build_datasets
 from cemnet_ros.train.run import TrainReport
 from cemnet_ros.train.scan_pairs import recovery_motion
-from cemnet_ros.train.scan_prep import cem_cloud, voxel_cloud, voxel_size
 from cemnet_ros.train.trainer import Trainer
 
 N_SCANS = 8
@@ -63,19 +62,12 @@ def test_scans_are_prepared_as_the_node_prepares_them(tiny_bag, scans_and_poses,
     train, val = build_datasets(bag_config(tiny_bag, tmp_path))
     assert (len(train), len(val)) == (6, 2)  # validation: the last scans
     scans, config = scans_and_poses[0], AlignerConfig()
-    # The aligner's own preparation (its private _preprocess, which scan_prep mirrors), without its __init__:
-    # that compiles the polish's kernels (a minute on the shared CI machine) which preparing a scan never runs.
-    aligner = object.__new__(ScanAligner)
-    aligner.config, aligner._scale = config, None
-    first = aligner._preprocess(scans[0].astype(np.float64))  # auto scale: measured on the first scan
-    assert train.scans.scale == first.scale and voxel_size(config.preprocess, first.scale) == first.voxel
-    aligner._scale = first.scale
-    frame = aligner._preprocess(scans[1].astype(np.float64))
-    dense = voxel_cloud(scans[1], config.preprocess, first.scale)
-    np.testing.assert_allclose(train.scans.clouds[1], frame.dense, atol=1e-5)
-    np.testing.assert_array_equal(dense, frame.dense)
-    np.testing.assert_array_equal(cem_cloud(dense, config.preprocess, first.scale, config.registration.n_points,
-                                            config.registration.seed), frame.sampled)
+    preprocessor = Preprocessor(config)  # the aligner's own preparation of its frames
+    first = preprocessor.frame(scans[0].astype(np.float64))  # auto scale: measured on the first scan
+    assert train.scans.scale == first.scale
+    preprocessor.adopt(first)
+    frame = preprocessor.frame(scans[1].astype(np.float64))
+    np.testing.assert_allclose(train.scans.clouds[1], frame.dense, atol=1e-5)  # float32 storage
 
 
 def test_pairs_carry_their_truth(tiny_bag, tmp_path):
