@@ -25,3 +25,17 @@ def bracket():
     """The package's procedural asymmetric shape, 1024 points in the unit sphere."""
     from cemnet_ros.data.shapes import bracket_shape
     return bracket_shape(1024, seed=0).astype(np.float64)
+
+
+@pytest.fixture(scope="session")
+def tiny_bag(tmp_path_factory) -> Path:
+    """4 ray-cast scans (16 beams x 360 steps) of the synthetic courtyard with ground truth."""
+    from cemnet_ros.data import scenes
+    from cemnet_ros.data.bags import write_bag
+
+    scene, lidar = scenes.courtyard_scene(), scenes.LidarModel(n_beams=16, n_azimuth=360)
+    rng = np.random.default_rng(3)
+    frames = [(scenes.lidar_scan(scene, pose, lidar, rng), pose) for pose in scenes.synthetic_trajectory(4)]
+    path = tmp_path_factory.mktemp("bags") / "tiny.mcap"
+    write_bag(path, frames, "lidar", 100_000_000)
+    return path

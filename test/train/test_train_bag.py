@@ -40,7 +40,7 @@ def scans_and_poses():
 
 
 @pytest.fixture(scope="module")
-def tiny_bag(scans_and_poses, tmp_path_factory) -> Path:
+def training_bag(scans_and_poses, tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("bag") / "courtyard.mcap"
     with BagWriter(path) as bag:
         for i, (points, pose) in enumerate(zip(*scans_and_poses)):
@@ -58,8 +58,8 @@ def bag_config(bag: Path, out: Path, **overrides) -> TrainConfig:
 
 
 # ---------------------------------------------------------------------------------------------- pairs
-def test_scans_are_prepared_as_the_node_prepares_them(tiny_bag, scans_and_poses, tmp_path):
-    train, val = build_datasets(bag_config(tiny_bag, tmp_path))
+def test_scans_are_prepared_as_the_node_prepares_them(training_bag, scans_and_poses, tmp_path):
+    train, val = build_datasets(bag_config(training_bag, tmp_path))
     assert (len(train), len(val)) == (6, 2)  # validation: the last scans
     scans, config = scans_and_poses[0], AlignerConfig()
     preprocessor = Preprocessor(config)  # the aligner's own preparation of its frames
@@ -70,13 +70,13 @@ def test_scans_are_prepared_as_the_node_prepares_them(tiny_bag, scans_and_poses,
     np.testing.assert_allclose(train.scans.clouds[1], frame.dense, atol=1e-5)  # float32 storage
 
 
-def test_pairs_carry_their_truth(tiny_bag, tmp_path):
+def test_pairs_carry_their_truth(training_bag, tmp_path):
     exact = ScanPairConfig(n_points=20_000, crop_deg=0.0, noise=0.0, consecutive=0.0)  # every voxel point, as is
-    train, _ = build_datasets(bag_config(tiny_bag, tmp_path, scans=exact))
+    train, _ = build_datasets(bag_config(training_bag, tmp_path, scans=exact))
     pair = train.pair(2, np.random.default_rng(0))
     moved = apply_transform(pair.T_target_source, pair.source)
     assert cKDTree(pair.target).query(moved)[0].max() < 1e-4 < np.abs(pair.source - pair.target).max()
-    two_scans, _ = build_datasets(bag_config(tiny_bag, tmp_path, scans=replace(exact, consecutive=1.0)))
+    two_scans, _ = build_datasets(bag_config(training_bag, tmp_path, scans=replace(exact, consecutive=1.0)))
     pair = two_scans.pair(2, np.random.default_rng(0))
     tree = cKDTree(pair.target)
     before = np.median(tree.query(pair.source)[0])
@@ -96,12 +96,12 @@ def test_motions_span_what_the_recovery_searches():
 
 # ------------------------------------------------------------------------------------------- training
 @pytest.mark.slow
-def test_training_on_a_bag_lowers_the_loss_and_round_trips_the_checkpoint(tiny_bag, tmp_path):
+def test_training_on_a_bag_lowers_the_loss_and_round_trips_the_checkpoint(training_bag, tmp_path):
     """12 steps on 4 frozen pairs (a loop whose gradients are right overfits them), then the checkpoint.
 
     Most points of a pair start beyond the Geman-McClure scale (yaw over the full circle), so the loss falls
     slowly; without a working step the prior's loss would not move at all (the pairs are frozen)."""
-    trainer = Trainer(bag_config(tiny_bag, tmp_path, epochs=12, val_every=12, limit_train=4, lr=1e-2))
+    trainer = Trainer(bag_config(training_bag, tmp_path, epochs=12, val_every=12, limit_train=4, lr=1e-2))
     trainer.train_set.fixed = True
     rows = trainer.fit()
     assert len(rows) == 12
@@ -122,8 +122,8 @@ def test_training_on_a_bag_lowers_the_loss_and_round_trips_the_checkpoint(tiny_b
 
 
 @pytest.mark.slow
-def test_cli_trains_from_a_bag_resumes_and_reports(tiny_bag, tmp_path, capsys):
-    flags = ["--bag", str(tiny_bag), "--topic", "/points", "--out", str(tmp_path), "--batch-size", "4",
+def test_cli_trains_from_a_bag_resumes_and_reports(training_bag, tmp_path, capsys):
+    flags = ["--bag", str(training_bag), "--topic", "/points", "--out", str(tmp_path), "--batch-size", "4",
              "--cem.n_candidates", "16", "--cem.n_iters", "2", "--val_cem.n_candidates", "16",
              "--val_cem.n_fused_iters", "0", "--threads", "1", "--scans.n_points", "96", "--val_fraction", "0.25",
              "--no-progress"]
