@@ -6,6 +6,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
@@ -126,3 +127,29 @@ class Harness:
         self.thread.join(10)
         self.node.destroy_node()
         self.probe.destroy_node()
+
+
+def read_bag(path):
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    clouds, truth = [], {}
+    with AnyReader([path], default_typestore=store) as reader:
+        cloud_topics = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/PointCloud2"]
+        truth_topics = [c for c in reader.connections if c.msgtype == "geometry_msgs/msg/PoseStamped"
+                        and c.topic.endswith("ground_truth")]
+        if not cloud_topics or not truth_topics:
+            pytest.skip(f"{path.name}: no PointCloud2 or ground_truth topic")
+        for conn, _, raw in reader.messages(connections=cloud_topics[:1] + truth_topics[:1]):
+            msg = reader.deserialize(raw, conn.msgtype)
+            ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            if conn in cloud_topics:
+                clouds.append((ns, bytes(raw)))
+            else:
+                q, p = msg.pose.orientation, msg.pose.position
+                pose = np.eye(4)
+                pose[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+                pose[:3, 3] = [p.x, p.y, p.z]
+                truth[ns] = pose
+    return clouds, truth

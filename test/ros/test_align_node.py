@@ -7,15 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from scipy.spatial.transform import Rotation
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
 
 from builtin_interfaces.msg import Time  # noqa: E402
-from node_harness import FIRST_TIMEOUT, POSES, WORLD, pose_of, scan_msg, stamp, wait_for  # noqa: E402
+from node_harness import FIRST_TIMEOUT, POSES, WORLD, pose_of, read_bag, scan_msg, stamp, wait_for  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
@@ -23,45 +21,15 @@ from std_srvs.srv import Trigger  # noqa: E402
 from cemnet_ros.bench.metrics import relative_error  # noqa: E402
 from cemnet_ros.data.street import make_transform  # noqa: E402
 from cemnet_ros.pointcloud2 import decode_xyz, make_pointcloud2  # noqa: E402
-from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
-from cemnet_ros.ros.node_config import node_parameters, params_file_text  # noqa: E402
 from cemnet_ros.ros.outputs import TFMessage  # noqa: E402
 
 pytestmark = pytest.mark.dds
 
 REPO = Path(__file__).resolve().parents[2]
-BAGS = sorted((REPO / "bags").glob("*.mcap"))
 
 
-def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_node(context, tmp_path):
-    path = REPO / "config" / "align_node.yaml"
-    assert path.read_text() == params_file_text(), "regenerate: python -m cemnet_ros.ros.node_config"
-    params = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
-    schema = node_parameters()
-    assert set(params) == set(schema)
-    assert all(params[n] == (list(p.default) if p.kind is tuple else p.default) for n, p in schema.items())
-    changed = tmp_path / "robot.yaml"
-    changed.write_text("/**:\n  ros__parameters:\n    registration.cem.n_iters: 7\n    base_frame: robot1/base\n")
-    node = AlignNode(context=context, cli_args=["--ros-args", "-r", "__ns:=/robot1", "-r", "__node:=lidar_odom",
-                                                "--params-file", str(path), "--params-file", str(changed)])
-    try:
-        assert node.get_fully_qualified_name() == "/robot1/lidar_odom"
-        assert node.get_parameter("registration.cem.n_iters").value == 7
-        assert node.get_parameter("mode").value == "sequential"
-        cem = node._session.config.registration.cem  # the parameters reach the pipeline's config
-        assert (cem.n_iters, cem.n_candidates) == (7, params["registration.cem.n_candidates"])
-        assert node._cfg.base_frame == "robot1/base"
-        result = node.set_parameters([Parameter("registration.n_points", value=100)])[0]  # read-only
-        assert not result.successful
-    finally:
-        node.destroy_node()
 
 
-def test_bad_parameter_values_are_refused(context):
-    with pytest.raises(ValueError, match="mode"):
-        AlignNode(context=context, parameter_overrides=[Parameter("mode", value="bogus")])
-    with pytest.raises(Exception, match="registration.n_points"):  # rclpy refuses it against the range
-        AlignNode(context=context, parameter_overrides=[Parameter("registration.n_points", value=3)])
 
 
 @pytest.mark.slow
@@ -271,7 +239,7 @@ def test_odometry_is_the_base_frames_motion_given_an_extrinsic(harness_factory):
     kitti = REPO / "bags" / "kitti_00_6scans.mcap"
     if not kitti.is_file():
         pytest.skip("bags/kitti_00_6scans.mcap missing")
-    clouds, _ = _read_bag(kitti)
+    clouds, _ = read_bag(kitti)
     extrinsic = (0.3, -0.1, 1.7, 0.01, -0.02, 0.5)
     small_cem = {"registration.cem.n_candidates": 100, "registration.cem.n_iters": 2}
     h = harness_factory({"base_to_sensor": list(extrinsic), **small_cem})
@@ -288,98 +256,8 @@ def test_odometry_is_the_base_frames_motion_given_an_extrinsic(harness_factory):
 
 
 # -- replay of the bundled bags over DDS ---------------------------------------------------------------------
-def _read_bag(path):
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    clouds, truth = [], {}
-    with AnyReader([path], default_typestore=store) as reader:
-        cloud_topics = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/PointCloud2"]
-        truth_topics = [c for c in reader.connections if c.msgtype == "geometry_msgs/msg/PoseStamped"
-                        and c.topic.endswith("ground_truth")]
-        if not cloud_topics or not truth_topics:
-            pytest.skip(f"{path.name}: no PointCloud2 or ground_truth topic")
-        for conn, _, raw in reader.messages(connections=cloud_topics[:1] + truth_topics[:1]):
-            msg = reader.deserialize(raw, conn.msgtype)
-            ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-            if conn in cloud_topics:
-                clouds.append((ns, bytes(raw)))
-            else:
-                q, p = msg.pose.orientation, msg.pose.position
-                pose = np.eye(4)
-                pose[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-                pose[:3, 3] = [p.x, p.y, p.z]
-                truth[ns] = pose
-    return clouds, truth
-
-
 # Per-pair floors from the issue (KITTI, synthetic) and ATE for RGB-D; the name of the bag picks the floor.
-FLOORS = {"kitti": ("pair", 0.05, 0.2), "synthetic": ("pair", 0.02, 0.1), "rgbd": ("ate", 0.02, None),
-          "7scenes": ("ate", 0.02, None), "scenes": ("ate", 0.02, None)}
 
 
-@pytest.mark.skipif(not BAGS, reason="bags/ has no .mcap yet")
-@pytest.mark.parametrize("bag", BAGS, ids=[b.stem for b in BAGS])
-def test_replay_bag_over_dds(harness_factory, bag):
-    from cemnet_ros.replay.trajectory import absolute_trajectory_error
-
-    clouds, truth = _read_bag(bag)
-    from cemnet_ros.pipeline.config import AlignerConfig
-    cem = AlignerConfig().registration.cem
-    h = harness_factory({"registration.cem.n_candidates": cem.n_candidates,  # the node's default CEM
-                         "registration.cem.n_iters": cem.n_iters})
-    estimates, started = [], time.monotonic()
-    for k, (ns, raw) in enumerate(clouds):
-        odom = h.send(raw, timeout=FIRST_TIMEOUT if k < 2 else 120.0)
-        out_ns = odom.header.stamp.sec * 1_000_000_000 + odom.header.stamp.nanosec
-        assert out_ns == ns
-        estimates.append(pose_of(odom))
-    elapsed = time.monotonic() - started
-    gt = [truth[ns] for ns, _ in clouds]
-    gt = [np.linalg.inv(gt[0]) @ g for g in gt]
-    pair_errors = [relative_error(np.linalg.inv(estimates[k - 1]) @ estimates[k], np.linalg.inv(gt[k - 1]) @ gt[k])
-                   for k in range(1, len(gt))]
-    ate = absolute_trajectory_error(estimates, gt)
-    worst_t, worst_r = (max(e[i] for e in pair_errors) for i in (0, 1))
-    print(f"\n{bag.name}: {len(clouds)} scans in {elapsed:.1f} s ({elapsed / len(clouds):.2f} s/scan incl. JIT); "
-          f"per pair max {worst_t * 100:.2f} cm / {worst_r:.3f} deg, mean "
-          f"{np.mean([e[0] for e in pair_errors]) * 100:.2f} cm / {np.mean([e[1] for e in pair_errors]):.3f} deg; "
-          f"ATE rmse {ate.rmse * 100:.2f} cm; diagnostics {h.values()}")
-    kind, trans_floor, rot_floor = next((v for k, v in FLOORS.items() if k in bag.stem.lower()), ("pair", 0.05, 0.2))
-    if kind == "ate":
-        assert ate.rmse <= trans_floor, f"ATE {ate.rmse * 100:.2f} cm > {trans_floor * 100:.0f} cm"
-    else:
-        assert worst_t <= trans_floor and worst_r <= rot_floor, (worst_t, worst_r)
 
 
-@pytest.mark.parametrize("args, needle", [
-    (["-p", "preprocess.voxel_size:=-5.0"], "preprocess.voxel_size"),
-    (["-p", "mode:=bogus"], "mode"),
-    (["-p", "preprocess.max_range:=far"], "preprocess.max_range"),
-    (["-p", "tracking.prior:=network", "-p", "registration.weights:=/nonexistent/w.npz"], "no such file"),
-])
-def test_fatal_configuration_is_one_line_and_exit_2(args, needle):
-    import subprocess
-    import sys
-
-    env = {**os.environ, "ROS_DOMAIN_ID": "231"}
-    run = subprocess.run([sys.executable, "-m", "cemnet_ros.ros.align_node", "--ros-args", *args], env=env,
-                         capture_output=True, text=True, timeout=60)
-    errors = [line for line in run.stderr.splitlines() if "error:" in line]
-    assert run.returncode == 2, run.stderr
-    assert "Traceback" not in run.stderr and len(errors) == 1 and needle in errors[0], run.stderr
-
-
-def test_a_corrupt_weights_file_ends_the_node_with_one_line(tmp_path):
-    import subprocess
-    import sys
-
-    weights = tmp_path / "corrupt.npz"
-    weights.write_bytes(b"not an npz archive")
-    env = {**os.environ, "ROS_DOMAIN_ID": "232"}
-    run = subprocess.run([sys.executable, "-m", "cemnet_ros.ros.align_node", "--ros-args", "-p",
-                          "tracking.prior:=network", "-p", f"registration.weights:={weights}"], env=env,
-                         capture_output=True, text=True, timeout=120)
-    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
-    assert run.stderr.strip().splitlines()[-1].startswith("align_node: error: the engine did not load"), run.stderr
