@@ -23,33 +23,10 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 from cemnet_ros.data import shared  # noqa: E402
 from cemnet_ros.data.bags import write_bag  # noqa: E402
 from cemnet_ros.data.kitti import kitti_frames  # noqa: E402
+from cemnet_ros.data.rgbd import rgbd_frames  # noqa: E402
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory  # noqa: E402
-from cemnet_ros.pipeline.preprocess import voxel_downsample  # noqa: E402
 
 SHARED = shared.SHARED / "data"
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Real data (the synthetic scene and the KITTI loader live in cemnet_ros.data)
-# ----------------------------------------------------------------------------------------------------------
-def rgbd_frames(root: Path, stride: int, voxel: float, max_depth: float):
-    """Yield (points (n,3) float32 in the camera optical frame, T_world_camera) for each depth frame."""
-    from PIL import Image  # pillow ships with matplotlib
-
-    fx = fy = 585.0
-    cx, cy = 320.0, 240.0
-    intr = root / "camera-intrinsics.txt"
-    if intr.exists():
-        k = np.loadtxt(intr)
-        fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
-    for depth_png in sorted((root / "rgbd-frames").glob("frame-*.depth.png")):
-        depth = np.asarray(Image.open(depth_png), dtype=np.float64)[::stride, ::stride] / 1000.0
-        v, u = np.mgrid[0 : depth.shape[0] * stride : stride, 0 : depth.shape[1] * stride : stride]
-        ok = (depth > 0) & (depth <= max_depth)
-        z = depth[ok]
-        pts = np.stack([(u[ok] - cx) * z / fx, (v[ok] - cy) * z / fy, z], axis=-1)
-        pose = np.loadtxt(depth_png.with_name(depth_png.name.replace(".depth.png", ".pose.txt")))
-        yield voxel_downsample(pts, voxel), pose
 
 
 # ----------------------------------------------------------------------------------------------------------
