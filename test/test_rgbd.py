@@ -7,7 +7,8 @@ import pytest
 from PIL import Image
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
-from shared_data import SHARED, requires_shared
+from script_loader import load_script
+from shared_data import OFFICIAL_DIR, SHARED, requires_shared
 
 from cemnet_ros.data import rgbd
 from cemnet_ros.data.rgbd import Intrinsics, depth_frames, depth_to_points, read_depth_png, read_intrinsics
@@ -188,3 +189,19 @@ def test_real_sevenscenes_pairs():
         moved = pair.source.astype(np.float64) @ pair.rotation.T + pair.translation
         # the two crops overlap: most moved source points have a target point nearby
         assert np.mean(cKDTree(pair.target).query(moved)[0] < 0.02) > 0.5
+
+
+@pytest.mark.slow
+@requires_shared(OFFICIAL_DIR)
+@requires_shared(SEVENSCENES)
+def test_sevenscenes_table_script(tmp_path, capsys):
+    table_script = load_script("sevenscenes_table")
+    assert table_script.main(["--data", str(SEVENSCENES), "--official-dir", str(OFFICIAL_DIR), "--seeds", "0,7",
+                              "--limit", "2", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert printed == (tmp_path / "sevenscenes.md").read_text() + "\n"
+    assert "| 2 (7) | CEMNet, package default weights |" in printed and "| all 2 seeds | ICP" in printed
+    results = json.loads((tmp_path / "sevenscenes.json").read_text())
+    assert set(results) == {"0", "7"}
+    assert {"cemnet", "cemnet_batchnorm", "cemnet_package", "icp"} <= set(results["0"])
+    assert len(results["7"]["icp"]["rot_err_deg"]) == 2
