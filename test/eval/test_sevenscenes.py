@@ -1,104 +1,35 @@
-"""Depth frames to clouds (data/rgbd.py) and the 7-Scenes clouds of the indoor protocol (eval/sevenscenes.py),
-on small synthetic depth images of planes whose geometry is known."""
+"""The 7-Scenes clouds of the paper's indoor protocol (cemnet_ros.eval.sevenscenes), cemnet-eval --source rgbd
+and scripts/sevenscenes_table.py: on synthetic depth images of planes, and on the real frames (../shared)."""
+import importlib.util
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
+from depth_images import (
+    POSES,
+    SEVENSCENES,
+    SHAPE,
+    WALL_NORMAL,
+    WALL_OFFSET,
+    K,
+    camera_pose,
+    plane_depth_mm,
+    write_folder,
+)
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
-from script_loader import load_script
-from shared_data import OFFICIAL_DIR, SHARED, requires_shared
+from shared_data import OFFICIAL_DIR, requires_shared
 
-from cemnet_ros.data import rgbd
-from cemnet_ros.data.rgbd import Intrinsics, depth_frames, depth_to_points, read_depth_png, read_intrinsics
+from cemnet_ros.data.rgbd import depth_frames, depth_to_points, read_intrinsics
 from cemnet_ros.eval.protocol import ProtocolConfig, protocol_pairs
 from cemnet_ros.eval.sevenscenes import SevenScenesConfig, fused_points, on_unit_cube, resample, sevenscenes_clouds
 
-K = Intrinsics(60.0, 55.0, 40.5, 29.5)  # an 80 x 60 image, fx != fy so that a swap would show
-SHAPE = (60, 80)
-SEVENSCENES = SHARED / "data" / "rgbd_7scenes"
-
-
-def _pose(rotvec, translation) -> np.ndarray:
-    pose = np.eye(4)
-    pose[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
-    pose[:3, 3] = translation
-    return pose
-
-
-def _plane_depth_mm(normal, offset, T_world_camera) -> np.ndarray:
-    """Depth (uint16 mm) of the world plane ``normal . p = offset`` seen by a camera at ``T_world_camera``."""
-    R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
-    v, u = np.mgrid[0:SHAPE[0], 0:SHAPE[1]]
-    rays = np.stack([(u - K.cx) / K.fx, (v - K.cy) / K.fy, np.ones(SHAPE)], axis=-1)  # z = 1 per ray
-    z = (offset - normal @ t) / (rays @ R.T @ normal)  # p_world = R (z ray) + t on the plane
-    return np.round(z * 1000.0).astype(np.uint16)
-
-
-def _write_folder(root, depths, poses) -> None:
-    (root / "rgbd-frames").mkdir(parents=True)
-    np.savetxt(root / "camera-intrinsics.txt", [[K.fx, 0, K.cx], [0, K.fy, K.cy], [0, 0, 1]])
-    for i, (depth, pose) in enumerate(zip(depths, poses)):
-        Image.fromarray(depth).save(root / "rgbd-frames" / f"frame-{i:06d}.depth.png")
-        np.savetxt(root / "rgbd-frames" / f"frame-{i:06d}.pose.txt", pose)
-
-
-WALL_NORMAL, WALL_OFFSET = np.array([0.2, -0.1, 1.0]) / np.linalg.norm([0.2, -0.1, 1.0]), 2.5
-POSES = [_pose([0.0, 0.0, 0.0], [0.0, 0.0, 0.0]), _pose([0.05, -0.1, 0.02], [0.3, -0.1, 0.2])]
-
-
-def test_back_projection_lands_on_the_plane(tmp_path):
-    depth = _plane_depth_mm(WALL_NORMAL, WALL_OFFSET, POSES[0])
-    path = tmp_path / "d.png"
-    Image.fromarray(depth).save(path)
-    metres = read_depth_png(path)
-    np.testing.assert_allclose(metres, depth / 1000.0)
-    points = depth_to_points(metres, K)
-    assert points.shape == (SHAPE[0] * SHAPE[1], 3)
-    assert np.abs(points @ WALL_NORMAL - WALL_OFFSET).max() < 1e-3  # the mm rounding only
-    # the principal point's ray is the optical axis: x = y = 0 there
-    centre = depth_to_points(metres[29:30, 40:41], Intrinsics(K.fx, K.fy, 0.0, 0.0))
-    np.testing.assert_allclose(centre[0], [0.0, 0.0, depth[29, 40] / 1000.0])
-    # x grows to the right (u), y downwards (v)
-    assert points[1, 0] > points[0, 0] and points[SHAPE[1], 1] > points[0, 1]
-
-
-def test_invalid_pixels_stride_and_max_depth(tmp_path):
-    depth = _plane_depth_mm(WALL_NORMAL, WALL_OFFSET, POSES[0])
-    depth[0, :10], depth[1, :5] = 0, 65535
-    Image.fromarray(depth).save(tmp_path / "d.png")
-    metres = read_depth_png(tmp_path / "d.png")
-    assert (metres == 0).sum() == 15
-    assert len(depth_to_points(metres, K)) == SHAPE[0] * SHAPE[1] - 15
-    assert len(depth_to_points(metres, K, stride=2)) == (SHAPE[0] // 2) * (SHAPE[1] // 2) - 5
-    near = depth_to_points(metres, K, max_depth=2.5)
-    assert 0 < len(near) < SHAPE[0] * SHAPE[1] - 15 and near[:, 2].max() <= 2.5
-    with pytest.raises(ValueError, match="stride"):
-        depth_to_points(metres, K, stride=0)
-    Image.fromarray(np.zeros(SHAPE, dtype=np.uint8)).save(tmp_path / "eight.png")
-    with pytest.raises(ValueError, match="16-bit"):
-        read_depth_png(tmp_path / "eight.png")
-
-
-def test_folder_intrinsics_poses_and_voxel_filter(tmp_path):
-    depths = [_plane_depth_mm(WALL_NORMAL, WALL_OFFSET, pose) for pose in POSES]
-    _write_folder(tmp_path, depths, POSES)
-    assert read_intrinsics(tmp_path) == K
-    assert read_intrinsics(tmp_path / "elsewhere") == rgbd.KINECT_7SCENES
-    frames = list(depth_frames(tmp_path))
-    assert [f.name for f in frames] == ["frame-000000", "frame-000001"]
-    np.testing.assert_allclose(frames[1].T_world_camera, POSES[1])
-    (points0, pose0), _ = list(rgbd.rgbd_frames(tmp_path, stride=1, voxel=0.2, max_depth=10.0))
-    assert 10 < len(points0) < SHAPE[0] * SHAPE[1] / 8  # one centroid per 20 cm voxel (~4 cm pixels)
-    assert np.abs(points0 @ WALL_NORMAL - WALL_OFFSET).max() < 2e-3  # centroids of a plane stay on it
-    with pytest.raises(FileNotFoundError):
-        list(depth_frames(tmp_path / "none"))
+TABLE_SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "sevenscenes_table.py"
 
 
 def test_fusion_uses_camera_to_world_poses(tmp_path):
-    depths = [_plane_depth_mm(WALL_NORMAL, WALL_OFFSET, pose) for pose in POSES]
-    _write_folder(tmp_path, depths, POSES)
+    depths = [plane_depth_mm(WALL_NORMAL, WALL_OFFSET, pose) for pose in POSES]
+    write_folder(tmp_path, depths, POSES)
     frames = list(depth_frames(tmp_path))
     fused = fused_points(frames, K, SevenScenesConfig(voxel=0.0))
     assert len(fused) == 2 * SHAPE[0] * SHAPE[1]
@@ -126,8 +57,8 @@ def test_unit_cube_and_resampling():
 
 
 def test_sevenscenes_clouds_windows_and_seeds(tmp_path):
-    poses = POSES + [_pose([0.0, 0.1, 0.0], [0.1, 0.0, 0.0])]
-    _write_folder(tmp_path, [_plane_depth_mm(WALL_NORMAL, WALL_OFFSET, p) for p in poses], poses)
+    poses = POSES + [camera_pose([0.0, 0.1, 0.0], [0.1, 0.0, 0.0])]
+    write_folder(tmp_path, [plane_depth_mm(WALL_NORMAL, WALL_OFFSET, p) for p in poses], poses)
     points, names = sevenscenes_clouds(tmp_path, SevenScenesConfig(voxel=0.0, n_resample=256))
     assert points.shape == (3, 256, 3) and points.dtype == np.float32
     assert names == ["frame-000000", "frame-000001", "frame-000002"]
@@ -146,8 +77,8 @@ def test_sevenscenes_clouds_windows_and_seeds(tmp_path):
 def test_eval_cli_on_rgbd_frames(tmp_path, capsys):
     from cemnet_ros.tools import eval_cli
 
-    corner = [_plane_depth_mm(WALL_NORMAL, WALL_OFFSET, POSES[0]), _plane_depth_mm(WALL_NORMAL, 2.0, POSES[1])]
-    _write_folder(tmp_path / "frames", corner, POSES)
+    corner = [plane_depth_mm(WALL_NORMAL, WALL_OFFSET, POSES[0]), plane_depth_mm(WALL_NORMAL, 2.0, POSES[1])]
+    write_folder(tmp_path / "frames", corner, POSES)
     out = tmp_path / "r.json"
     assert eval_cli.main(["--source", "rgbd", "--data", str(tmp_path / "frames"), "--methods", "icp",
                           "--rgbd.voxel", "0", "--out-json", str(out)]) == 0
@@ -195,7 +126,9 @@ def test_real_sevenscenes_pairs():
 @requires_shared(OFFICIAL_DIR)
 @requires_shared(SEVENSCENES)
 def test_sevenscenes_table_script(tmp_path, capsys):
-    table_script = load_script("sevenscenes_table")
+    spec = importlib.util.spec_from_file_location("sevenscenes_table", TABLE_SCRIPT)
+    table_script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(table_script)
     assert table_script.main(["--data", str(SEVENSCENES), "--official-dir", str(OFFICIAL_DIR), "--seeds", "0,7",
                               "--limit", "2", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
