@@ -30,6 +30,7 @@ setup(
         "torch>=2.2",
         "tqdm>=4.60",
         "matplotlib>=3.7",
+        "pillow>=9",  # depth PNGs (7-Scenes); matplotlib needs it too
         "rosbags>=0.10",
         "mcap>=1.1",
         "pyyaml>=6.0",

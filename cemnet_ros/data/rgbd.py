@@ -54,7 +54,7 @@ def read_intrinsics(root: Union[str, Path]) -> Intrinsics:
 
 def read_depth_png(path: Union[str, Path]) -> np.ndarray:
     """A uint16 millimetre depth PNG as metres (float64), pixels without a reading set to 0."""
-    from PIL import Image  # pillow ships with matplotlib
+    from PIL import Image  # pillow: an install requirement (matplotlib needs it too)
 
     with Image.open(path) as image:
         raw = np.asarray(image)

@@ -33,6 +33,7 @@ ROSDEP_KEYS = {
     "scipy": "python3-scipy",
     "numba": "python3-numba",
     "matplotlib": "python3-matplotlib",
+    "PIL": "python3-pil",  # 7-Scenes depth PNGs (cemnet_ros/data/rgbd.py)
     "tqdm": "python3-tqdm",
     "yaml": "python3-yaml",
     "torch": (PIP, "torch"),  # python3-torch is the distribution's own build, not the pinned 2.13.0 CPU one
