@@ -5,13 +5,14 @@ The large-motion pairs of ``scripts/bench_robustness.py`` (courtyard, yaw any, |
 fresh ``ScanAligner`` per configuration: the first scan, then the second 0.1 s later (a recovery: "first pair").
 All configurations see the same pairs in the same run, interleaved pair by pair (the order rotating) so that the
 machine's load hits them alike: ``uniform-N``, a uniform scatter of N (the default ``recovery.search.n_scatter``,
-1/2, 1/4 of it); ``network+N``, the network's raw N(mu0, sigma0) (``--weights``) drawing ``--n-prior`` candidates
-on top of a uniform N; ``oracle+N`` (``--oracle``), a prior at the true motion: the most a network could give.
+then ``--uniform-fractions`` of it: 1/2, 1/4); ``network+N``, the network's raw N(mu0, sigma0) (``--weights``)
+drawing ``--n-prior`` candidates on top of a uniform N (``--prior-fractions``: 1/4, 1/2); ``oracle+N``
+(``--oracle``, beside the smallest), a prior at the true motion: the most a network could give.
 
 ``recovery.search.time_budget_s`` is ``--time-budget`` (default: the schema's maximum): the sizes decide the work,
 not the machine's load. Issue 12's criterion: a prior pays if it reaches the default's recall at <= 0.5x its time
-(the ratio of medians and the paired ratio both), or a higher recall than a uniform scatter that took at least as
-long. Timings on a shared machine are noisy.
+or a higher recall than a uniform scatter that took at least as long (by the ratio of medians and the paired ratio
+both, each against the default). Timings on a shared machine are noisy.
 
     python scripts/bench_recovery_prior.py --pairs 2 --seeds 0                  # a smoke run
     python scripts/bench_recovery_prior.py --pairs 20 --seeds 0 1 --weights W.npz --out results/recovery_prior.json
@@ -77,12 +78,14 @@ class Variant:
     prior: str  # "uniform", "network" or "oracle"
 
 
-def variants(default_scatter: int, oracle: bool) -> list[Variant]:
-    """The uniform scatter at its default size, 1/2 and 1/4; the network (and oracle) prior with 1/4 and 1/2."""
-    half, quarter = default_scatter // 2, default_scatter // 4
-    out = [Variant(f"uniform-{n}", n, "uniform") for n in (default_scatter, half, quarter)]
-    out += [Variant(f"network+{n}", n, "network") for n in (quarter, half)]
-    return out + ([Variant(f"oracle+{quarter}", quarter, "oracle")] if oracle else [])
+def variants(default_scatter: int, uniform: list[float], prior: list[float], oracle: bool) -> list[Variant]:
+    """The default uniform scatter first, then those ``uniform`` fractions of it; the network prior beside uniform
+    scatters of the ``prior`` fractions; the oracle beside the smallest of them."""
+    size = {f: max(1, round(default_scatter * f)) for f in uniform + prior}
+    out = [Variant(f"uniform-{n}", n, "uniform") for n in dict.fromkeys([default_scatter, *map(size.get, uniform)])]
+    beside = list(dict.fromkeys(size[f] for f in prior))
+    out += [Variant(f"network+{n}", n, "network") for n in beside]
+    return out + ([Variant(f"oracle+{min(beside)}", min(beside), "oracle")] if oracle else [])
 
 
 def config_for(variant: Variant, args: argparse.Namespace) -> AlignerConfig:
@@ -114,8 +117,7 @@ class OraclePrior:
 
     def __init__(self, truth: np.ndarray, sigma: np.ndarray) -> None:
         self.truth, self.sigma = truth, np.asarray(sigma, dtype=np.float64)
-        self.aligner: Optional[ScanAligner] = None
-        self.mu0: Optional[np.ndarray] = None
+        self.aligner, self.mu0 = None, None  # the aligner it serves (set once built), the last mu0 it gave
 
     def register_batch(self, source, target, run_cem: bool = False):
         assert self.aligner is not None and self.aligner.scale is not None
@@ -143,9 +145,8 @@ class PriorOdometry:
         """(m, deg) of the prior's mu0 against the true motion; None without a prior (or before it ran)."""
         if self.prior is None or self.prior.mu0 is None or self.aligner.scale is None:
             return None, None
-        from_units = np.diag([self.aligner.scale] * 3 + [1.0])
-        return robust.relative_error(from_units @ action_to_matrix_np(self.prior.mu0) @ np.linalg.inv(from_units),
-                                     truth)
+        units = np.diag([self.aligner.scale] * 3 + [1.0])  # units -> metres
+        return robust.relative_error(units @ action_to_matrix_np(self.prior.mu0) @ np.linalg.inv(units), truth)
 
 
 def run_pair(pair, variant: Variant, config: AlignerConfig, network, oracle_sigma: np.ndarray) -> dict:
@@ -166,8 +167,8 @@ def run(pairs: list, chosen: list[Variant], configs: dict, network, args: argpar
     steps: dict[str, list[dict]] = {v.name: [] for v in chosen}
     for k, pair in enumerate(pairs):
         start = time.perf_counter()
-        for variant in chosen[k % len(chosen):] + chosen[:k % len(chosen)]:
-            steps[variant.name].append(run_pair(pair, variant, configs[variant.name], network, args.oracle_sigma))
+        for v in chosen[k % len(chosen):] + chosen[:k % len(chosen)]:
+            steps[v.name].append(run_pair(pair, v, configs[v.name], network, args.oracle_sigma))
         log(f"pair {k + 1}/{len(pairs)} {pair.name}: {time.perf_counter() - start:.0f} s")
         write_results(args.out, meta, chosen, steps)
     return steps
@@ -175,11 +176,10 @@ def run(pairs: list, chosen: list[Variant], configs: dict, network, args: argpar
 
 def summaries(chosen: list[Variant], steps: dict) -> dict:
     """Per variant: bench_robustness's summary, the prior's own recall, and time ratios against the default."""
-    default = chosen[0].name
-    base, out = robust.summarize(steps[default]), {}
+    default, out = chosen[0].name, {}
     for variant in chosen:
         own = steps[variant.name]
-        summary = robust.summarize(own)
+        summary, base = robust.summarize(own), robust.summarize(steps[default])
         paired = [s["ms"] / d["ms"] for s, d in zip(own, steps[default]) if s["ms"] and d["ms"]]
         priors = [s for s in own if s["prior_rte_m"] is not None]
         summary.update({
@@ -194,13 +194,13 @@ def summaries(chosen: list[Variant], steps: dict) -> dict:
 
 
 def verdicts(chosen: list[Variant], summary: dict) -> list[str]:
-    """Issue 12's criterion for each prior variant, in words."""
-    recall, ms = ({v.name: summary[v.name][key] for v in chosen} for key in ("recall", "ms_median"))
-    default, uniform, lines = chosen[0].name, [v.name for v in chosen if v.prior == "uniform"], []
+    """Issue 12's criterion for each prior variant, in words (time: the ratio of medians and the paired ratio)."""
+    recall, default = {v.name: summary[v.name]["recall"] for v in chosen}, chosen[0].name
+    ratios = {n: (summary[n]["ms_median_ratio"], summary[n]["ms_paired_ratio"] or np.inf) for n in recall}
+    uniform, lines = [v.name for v in chosen if v.prior == "uniform"], []
     for name in (v.name for v in chosen if v.prior != "uniform"):
-        ratio = max(summary[name]["ms_median_ratio"], summary[name]["ms_paired_ratio"] or np.inf)
-        same_recall_faster = recall[name] >= recall[default] and ratio <= 0.5
-        beaten = [u for u in uniform if ms[u] >= ms[name] and recall[name] > recall[u]]
+        same_recall_faster = recall[name] >= recall[default] and max(ratios[name]) <= 0.5
+        beaten = [u for u in uniform if min(np.subtract(ratios[u], ratios[name])) >= 0 and recall[name] > recall[u]]
         why = ("the default's recall at <= 0.5x its time" if same_recall_faster else
                f"a higher recall than {', '.join(beaten)} (which took at least as long)" if beaten else
                "neither the default's recall at <= 0.5x its time nor a higher recall at the same time")
@@ -251,6 +251,10 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pairs", type=int, default=20, help="large-motion pairs per seed (default 20)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="pair seeds (default 0 1)")
+    parser.add_argument("--uniform-fractions", type=float, nargs="+", default=[0.5, 0.25],
+                        help="uniform scatters besides the default, as fractions of it (default 0.5 0.25)")
+    parser.add_argument("--prior-fractions", type=float, nargs="+", default=[0.25, 0.5],
+                        help="the uniform scatters beside the prior, as fractions of the default (default 0.25 0.5)")
     parser.add_argument("--weights", default="", help="the network's weights ('' = the package's; 'official'; path)")
     parser.add_argument("--allow-pickle", action="store_true", help="allow pickled (.pth) weights you trust")
     parser.add_argument("--n-prior", type=int, default=search.n_prior, help=f"prior draws (default {search.n_prior})")
@@ -264,15 +268,15 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_recovery_prior.json",
                         help="JSON output (the markdown goes beside it, .md)")
     args = parser.parse_args(argv)
-    if args.pairs < 1 or args.n_prior < 0 or args.prior_scale <= 0:
-        parser.error("--pairs must be >= 1, --n-prior >= 0, --prior-scale > 0")
+    if args.pairs < 1 or args.n_prior < 0 or min(args.prior_scale, *args.uniform_fractions, *args.prior_fractions) <= 0:
+        parser.error("--pairs must be >= 1, --n-prior >= 0, --prior-scale and the fractions > 0")
     args.oracle_sigma = np.asarray(args.oracle_sigma, dtype=np.float64)
     return args
 
 
 def main(argv: Optional[list[str]] = None) -> int:
     args = parse_args(argv)
-    chosen = variants(GlobalSearchConfig().n_scatter, args.oracle)
+    chosen = variants(GlobalSearchConfig().n_scatter, args.uniform_fractions, args.prior_fractions, args.oracle)
     configs = {v.name: config_for(v, args) for v in chosen}
     network = prior_registrar(configs[next(v.name for v in chosen if v.prior == "network")])
     meta = {"argv": sys.argv[1:] if argv is None else list(argv), "seeds": args.seeds, "pairs_per_seed": args.pairs,

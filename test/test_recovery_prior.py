@@ -72,9 +72,11 @@ def _summary(recall, ms, paired=None):
 
 
 def test_the_benchmark_applies_issue_12s_criterion():
-    chosen = bench.variants(2000, oracle=False)
+    chosen = bench.variants(2000, [0.5, 0.25], [0.25, 0.5], oracle=False)
     assert [v.name for v in chosen] == ["uniform-2000", "uniform-1000", "uniform-500", "network+500",
                                         "network+1000"]
+    assert [v.name for v in bench.variants(2000, [1.0, 0.0625], [0.0625], oracle=True)] == [
+        "uniform-2000", "uniform-125", "network+125", "oracle+125"]  # the default once, first
     summary = {"uniform-2000": _summary(0.9, 1000), "uniform-1000": _summary(0.8, 700),
                "uniform-500": _summary(0.6, 500), "network+500": _summary(0.9, 450),
                "network+1000": _summary(0.85, 700)}
@@ -82,8 +84,9 @@ def test_the_benchmark_applies_issue_12s_criterion():
     assert "PAYS" in pays and "0.5x" in pays  # the default's recall at 0.45x
     assert "PAYS" in higher and "uniform-1000" in higher  # more recall than the uniform scatter as slow
     summary = {"uniform-2000": _summary(0.9, 1000), "uniform-1000": _summary(0.9, 700),
-               "uniform-500": _summary(0.6, 400), "network+500": _summary(0.9, 450, paired=0.6),  # paired: not 0.5x
-               "network+1000": _summary(0.9, 700)}  # ties are not higher, uniform-500 was faster
+               "uniform-500": _summary(0.6, 500, paired=0.4),  # slower by the medians, faster pair by pair
+               "network+500": _summary(0.9, 450, paired=0.6),  # not 0.5x pair by pair
+               "network+1000": _summary(0.9, 700)}  # ties are not higher
     assert all("does not pay" in line for line in bench.verdicts(chosen, summary))
     config = bench.config_for(chosen[3], bench.parse_args(["--n-prior", "300"]))
     assert (config.recovery.prior, config.recovery.search.n_scatter, config.recovery.search.n_prior) == (
