@@ -1,13 +1,13 @@
 #!/usr/bin/env python3
 """Does a learned prior pay in the recovery's global search? (issue 12)
 
-The large-motion pairs of ``scripts/bench_robustness.py`` (courtyard, yaw any, |t| up to 10 m), each through a
-fresh ``ScanAligner`` per configuration: the first scan, then the second 0.1 s later (a recovery: "first pair").
-All configurations see the same pairs in the same run, interleaved pair by pair (the order rotating) so that the
-machine's load hits them alike: ``uniform-N``, a uniform scatter of N (the default ``recovery.search.n_scatter``,
-then ``--uniform-fractions`` of it: 1/2, 1/4); ``network+N``, the network's raw N(mu0, sigma0) (``--weights``)
-drawing ``--n-prior`` candidates on top of a uniform N (``--prior-fractions``: 1/4, 1/2); ``oracle+N``
-(``--oracle``, beside the smallest), a prior at the true motion: the most a network could give.
+The robustness benchmark's large-motion pairs (``cemnet_ros.bench.pairs``: courtyard, yaw any, |t| up to 10 m),
+each through a fresh ``ScanAligner`` per configuration: the first scan, then the second 0.1 s later (a recovery:
+"first pair"). All configurations see the same pairs in the same run, interleaved pair by pair (the order
+rotating) so that the machine's load hits them alike: ``uniform-N``, a uniform scatter of N (the default
+``recovery.search.n_scatter``, then ``--uniform-fractions`` of it: 1/2, 1/4); ``network+N``, the network's raw
+N(mu0, sigma0) (``--weights``) drawing ``--n-prior`` candidates on top of a uniform N (``--prior-fractions``: 1/4,
+1/2); ``oracle+N`` (``--oracle``, beside the smallest), a prior at the true motion: the most a network could give.
 
 ``recovery.search.time_budget_s`` is ``--time-budget`` (default: the schema's maximum): the sizes decide the work,
 not the machine's load. Issue 12's criterion: a prior pays if it reaches the default's recall at <= 0.5x its time
@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
-import json
 import platform
 import sys
 import time
@@ -36,33 +34,25 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
+from cemnet_ros.bench import metrics  # noqa: E402
+from cemnet_ros.bench.odometry import Output  # noqa: E402
+from cemnet_ros.bench.pairs import large_motion_pairs, pair_record  # noqa: E402
+from cemnet_ros.bench.streams import run_stream  # noqa: E402
 from cemnet_ros.core.config import GlobalSearchConfig  # noqa: E402
 from cemnet_ros.core.geometry import action_to_matrix_np, matrix_to_action_np  # noqa: E402
-from cemnet_ros.io.atomic import atomic_write_text, jsonable  # noqa: E402
+from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.io.console import log  # noqa: E402
 from cemnet_ros.pipeline.aligner import ScanAligner  # noqa: E402
 from cemnet_ros.pipeline.config import AlignerConfig  # noqa: E402
 from cemnet_ros.pipeline.recovery import prior_registrar  # noqa: E402
 
-
-def _load_robustness():
-    """scripts/bench_robustness.py as a module: its pairs, stream runner and metrics."""
-    spec = importlib.util.spec_from_file_location("bench_robustness", REPO / "scripts" / "bench_robustness.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("bench_robustness", module)  # dataclasses look their module up while being built
-    spec.loader.exec_module(module)
-    return module
-
-
-robust = _load_robustness()
 MAX_TIME_BUDGET = 60.0  # the schema's upper bound of recovery.search.time_budget_s
 NOISE = "timings noisy, machine shared"
 DEFINITIONS = "\n".join([
     "Definitions. The step is the pair's second scan (a recovery); RTE / RRE: translation (m) / rotation angle (deg)",
-    f"of inv(T_true) @ T_est. recall: RTE < {robust.RECALL_M} m and RRE < {robust.RECALL_DEG} deg; precise: RTE < "
-    f"{robust.PRECISE_M} m and RRE < {robust.PRECISE_DEG} deg; both over all pairs whatever their flag. accepted",
-    "wrong: accepted and not precise; flagged: not accepted; failed: an exception.",
+    f"of inv(T_true) @ T_est. recall: RTE < {metrics.RECALL_M} m and RRE < {metrics.RECALL_DEG} deg; precise:",
+    f"RTE < {metrics.PRECISE_M} m and RRE < {metrics.PRECISE_DEG} deg; both over all pairs whatever their flag.",
+    "accepted wrong: accepted and not precise; flagged: not accepted; failed: an exception.",
     "ms: wall time of the second scan's process() call (the network's prior included); paired / default: the median",
     "over pairs of that time over the default's on the same pair.",
     "prior's mu0 within recall: the prior's mean alone (before any search) within the recall thresholds.",
@@ -127,7 +117,7 @@ class OraclePrior:
 
 
 class PriorOdometry:
-    """A fresh ScanAligner with one variant's config, behind bench_robustness's ``process`` interface."""
+    """A fresh ScanAligner with one variant's config, behind the benchmark's odometry ``process`` interface."""
 
     def __init__(self, config: AlignerConfig, variant: Variant, network, truth: np.ndarray,
                  oracle_sigma: np.ndarray) -> None:
@@ -139,14 +129,14 @@ class PriorOdometry:
 
     def process(self, points: np.ndarray, stamp_ns: int):
         step = self.aligner.process(points, stamp_ns)
-        return robust.Output(np.asarray(step.pose), bool(step.accepted), str(step.reason))
+        return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason))
 
     def prior_error(self, truth: np.ndarray) -> tuple[Optional[float], Optional[float]]:
         """(m, deg) of the prior's mu0 against the true motion; None without a prior (or before it ran)."""
         if self.prior is None or self.prior.mu0 is None or self.aligner.scale is None:
             return None, None
         units = np.diag([self.aligner.scale] * 3 + [1.0])  # units -> metres
-        return robust.relative_error(units @ action_to_matrix_np(self.prior.mu0) @ np.linalg.inv(units), truth)
+        return metrics.relative_error(units @ action_to_matrix_np(self.prior.mu0) @ np.linalg.inv(units), truth)
 
 
 def run_pair(pair, variant: Variant, config: AlignerConfig, network, oracle_sigma: np.ndarray) -> dict:
@@ -157,7 +147,7 @@ def run_pair(pair, variant: Variant, config: AlignerConfig, network, oracle_sigm
         built.append(PriorOdometry(config, variant, network, pair.truth, oracle_sigma))
         return built[-1]
 
-    record = robust.pair_record(pair, robust.run_stream(factory, 100.0, [pair.first, pair.second], [0, pair.gap]))
+    record = pair_record(pair, run_stream(factory, 100.0, [pair.first, pair.second], [0, pair.gap]))
     record["prior_rte_m"], record["prior_rre_deg"] = built[0].prior_error(pair.truth) if built else (None, None)
     return record
 
@@ -175,19 +165,19 @@ def run(pairs: list, chosen: list[Variant], configs: dict, network, args: argpar
 
 
 def summaries(chosen: list[Variant], steps: dict) -> dict:
-    """Per variant: bench_robustness's summary, the prior's own recall, and time ratios against the default."""
+    """Per variant: the benchmark's summary, the prior's own recall, and time ratios against the default."""
     default, out = chosen[0].name, {}
     for variant in chosen:
         own = steps[variant.name]
-        summary, base = robust.summarize(own), robust.summarize(steps[default])
+        summary, base = metrics.summarize(own), metrics.summarize(steps[default])
         paired = [s["ms"] / d["ms"] for s, d in zip(own, steps[default]) if s["ms"] and d["ms"]]
         priors = [s for s in own if s["prior_rte_m"] is not None]
         summary.update({
             "ms_median_ratio": summary["ms_median"] / base["ms_median"],  # every step is timed, failed ones too
             "ms_p90_ratio": summary["ms_p90"] / base["ms_p90"],
             "ms_paired_ratio": float(np.median(paired)) if paired else None,
-            "prior_recall": (sum(robust.within(s["prior_rte_m"], s["prior_rre_deg"], robust.RECALL_M,
-                                               robust.RECALL_DEG) for s in priors) / len(priors)) if priors else None,
+            "prior_recall": (sum(metrics.within(s["prior_rte_m"], s["prior_rre_deg"], metrics.RECALL_M,
+                                                metrics.RECALL_DEG) for s in priors) / len(priors)) if priors else None,
         })
         out[variant.name] = summary
     return out
@@ -237,12 +227,10 @@ def write_results(out: Path, meta: dict, chosen: list[Variant], steps: dict) -> 
     markdown = "\n\n".join([f"{len(steps[chosen[0].name])} pairs, seeds {meta['seeds']}, weights "
                             f"{meta['weights'] or '(package default)'}; {NOISE}",
                             table(chosen, summary, meta["n_prior"]), "\n".join(lines), DEFINITIONS]) + "\n"
-    out.parent.mkdir(parents=True, exist_ok=True)
     configs = {v.name: {"variant": dataclasses.asdict(v), "summary": summary[v.name], "steps": steps[v.name]}
                for v in chosen}
-    atomic_write_text(out, json.dumps(jsonable({"meta": meta, "configs": configs, "verdicts": lines}), indent=1,
-                                      allow_nan=False) + "\n")
-    atomic_write_text(out.with_suffix(".md"), markdown)
+    write_report(out, json_text({"meta": meta, "configs": configs, "verdicts": lines}))
+    write_report(out.with_suffix(".md"), markdown)
     return markdown
 
 
@@ -286,8 +274,8 @@ def main(argv: Optional[list[str]] = None) -> int:
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     log(f"variants: {', '.join(v.name for v in chosen)}; ray-casting {args.pairs} pairs per seed {args.seeds}")
     pairs = [dataclasses.replace(pair, name=f"s{seed}/{pair.name}")
-             for seed in args.seeds for pair in robust.large_motion_pairs(args.pairs, seed)]
-    warm = robust.large_motion_pairs(1, max(args.seeds) + 1000)[0]
+             for seed in args.seeds for pair in large_motion_pairs(args.pairs, seed)]
+    warm = large_motion_pairs(1, max(args.seeds) + 1000)[0]
     for variant in chosen:  # untimed: kernels compiled, the network's first call paid
         run_pair(warm, variant, configs[variant.name], network, args.oracle_sigma)
     steps = run(pairs, chosen, configs, network, args, meta)
