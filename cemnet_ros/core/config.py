@@ -99,6 +99,9 @@ class GlobalSearchConfig:
     """How wide and how long the global search looks (units: radians and engine units)."""
 
     n_scatter: int = param(2000, "candidates of the coarse scatter over yaw and translation", low=1)
+    n_prior: int = param(500, "with a prior (recovery.prior 'network'): candidates drawn from it, N(mu0, "
+                         "(prior_scale sigma0)^2), in addition to the uniform scatter", low=0)
+    prior_scale: float = param(1.0, "k: how much wider than the prior's sigma0 those are drawn", low=1e-3)
     coarse_epsilon: float = param(0.2, "epsilon of the coarse scoring (network units; the CEM refinement uses "
                                   "its own)", low=1e-4)
     tilt_sigma: float = param(0.03, "roll and pitch spread of the scatter (rad)", low=0.0)
@@ -120,6 +123,8 @@ class GlobalSearchConfig:
     def __post_init__(self) -> None:
         if self.n_scatter < max(self.n_hypotheses, self.n_seeds) or min(self.n_hypotheses, self.n_seeds) < 1:
             raise ValueError("need n_scatter >= n_hypotheses, n_seeds >= 1")
+        if self.n_prior < 0 or self.prior_scale <= 0:
+            raise ValueError("n_prior must be >= 0 and prior_scale > 0")
         if self.n_per_seed < 0 or len(self.resample_sigma) != 6 or min(self.resample_sigma) <= 0:
             raise ValueError("n_per_seed must be >= 0 and resample_sigma six positive spreads")
         if self.coarse_epsilon <= 0:

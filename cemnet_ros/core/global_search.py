@@ -4,7 +4,9 @@ Local registration (ICP, or a CEM around a prediction) falls into the nearest mi
 no initial guess, so a wide search survives what breaks local methods (the first pair, a dropout, a kidnap):
 
 1. **scatter**: candidates drawn uniformly over yaw (the full circle about the cloud's z axis), uniformly over a
-   disc of translations around a centre, with small roll, pitch and height spreads (a ground robot);
+   disc of translations around a centre, with small roll, pitch and height spreads (a ground robot); with a
+   prior (e.g. the sampling network's mu0, sigma0), ``n_prior`` more drawn from it, so that a good prior lets
+   a smaller uniform scatter suffice;
 2. **score coarsely**: each candidate's fused reward (the paper's current + after-ICP max-consensus) at a coarse
    epsilon, so that candidates in the right basin score even when they are metres off;
 3. **resample**: new candidates around the best distinct ones, scored the same way (one cross-entropy step of a
@@ -35,6 +37,18 @@ SCATTER_CHUNK = 500  # candidates scored between two looks at the clock
 
 
 @dataclass
+class SearchPrior:
+    """A Gaussian over actions (6,) ``[euler z, y, x, tx, ty, tz]`` (units) that part of the scatter is drawn from.
+
+    It is used as given: the spread's widening is the search's ``prior_scale``, and the uniform scatter beside it
+    is the exploration (the CEM's test-time blend towards the identity would halve a large yaw).
+    """
+
+    mu: np.ndarray
+    sigma: np.ndarray
+
+
+@dataclass
 class Hypothesis:
     """One refined answer of the global search: ``T_target_source`` (4x4, units) and its fitness in [0, 1]."""
 
@@ -43,9 +57,23 @@ class Hypothesis:
     sigma: np.ndarray  # (6,) the CEM's final spread
 
 
-def scatter(centre: np.ndarray, radius: float, config: GlobalSearchConfig, rng: np.random.Generator) -> np.ndarray:
-    """(n_scatter, 6) actions: yaw uniform on the circle, translation uniform on a disc around ``centre`` (6,)."""
-    n = config.n_scatter
+def scatter(centre: np.ndarray, radius: float, config: GlobalSearchConfig, rng: np.random.Generator,
+            prior: Optional[SearchPrior] = None) -> np.ndarray:
+    """(n_scatter, 6) actions: yaw uniform on the circle, translation uniform on a disc around ``centre`` (6,).
+
+    With a ``prior``, (n_prior + n_scatter, 6): the first ``n_prior`` from N(mu, (prior_scale * sigma)^2) (first:
+    the coarse scoring may stop at its deadline), the uniform ones drawn as without a prior.
+    """
+    uniform = _uniform(centre, radius, config.n_scatter, config, rng)
+    if prior is None:
+        return uniform
+    drawn = prior.mu + rng.normal(size=(config.n_prior, 6)) * (config.prior_scale * np.asarray(prior.sigma))
+    return np.vstack([drawn, uniform])
+
+
+def _uniform(centre: np.ndarray, radius: float, n: int, config: GlobalSearchConfig, rng: np.random.Generator
+             ) -> np.ndarray:
+    """(n, 6) actions: yaw uniform on the circle, translation uniform on the disc, small tilt and height."""
     r, angle = radius * np.sqrt(rng.uniform(0.0, 1.0, n)), rng.uniform(-np.pi, np.pi, n)
     actions = np.empty((n, 6))
     actions[:, 0] = centre[0] + rng.uniform(-np.pi, np.pi, n)
@@ -84,11 +112,13 @@ def _score_within(scorer: CandidateScorer, actions: np.ndarray, deadline: float)
 
 
 def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, radius: float,
-                  config: Optional[GlobalSearchConfig] = None, seed: int = 0) -> list[Hypothesis]:
+                  config: Optional[GlobalSearchConfig] = None, seed: int = 0,
+                  prior: Optional[SearchPrior] = None) -> list[Hypothesis]:
     """Search ``T_target_source`` for prepared clouds (n, 3), (m, 3) in units; best hypothesis first.
 
     ``centre`` (6,) is the action the translation disc and yaw circle are centred on (e.g. a prediction) and
-    ``radius`` the disc's radius in units.
+    ``radius`` the disc's radius in units; ``prior`` (absolute actions, not relative to ``centre``) adds
+    ``config.n_prior`` candidates drawn from it to the scatter.
     """
     start = time.perf_counter()
     config = config or GlobalSearchConfig()
@@ -98,7 +128,7 @@ def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, ra
     coarse = CEMConfig(epsilon=config.coarse_epsilon, icp_steps=config.refine.icp_steps,
                        icp_max_distance=2.0 * config.coarse_epsilon)
     scorer = CandidateScorer(src, tgt, coarse)
-    actions = scatter(np.asarray(centre, dtype=np.float64), radius, config, rng)
+    actions = scatter(np.asarray(centre, dtype=np.float64), radius, config, rng, prior)
     actions, cost = _score_within(scorer, actions, start + 0.5 * config.time_budget_s)
     seeds = distinct_best(actions, cost, config, config.n_seeds)
     around = (seeds[:, None, :] + rng.normal(size=(len(seeds), config.n_per_seed, 6))

@@ -38,7 +38,7 @@ from cemnet_ros.pipeline.health import HealthMonitor
 from cemnet_ros.pipeline.input_checks import InputChecks
 from cemnet_ros.pipeline.motion import ConstantVelocity
 from cemnet_ros.pipeline.pair_mode import PairMode
-from cemnet_ros.pipeline.recovery import Recovery
+from cemnet_ros.pipeline.recovery import Recovery, prior_registrar
 from cemnet_ros.pipeline.sweep import SweepDeskewer
 from cemnet_ros.pipeline.tracking import Tracker
 from cemnet_ros.pipeline.verdict import AlignmentStep, Estimate, StepJudge
@@ -48,7 +48,10 @@ from cemnet_ros.pipeline.voxel_map import VoxelMap
 class ScanAligner:
     """Stateful scan pipeline; see the module docstring for the recipe."""
 
-    def __init__(self, config: Optional[AlignerConfig] = None, registrar: Optional[Registrar] = None) -> None:
+    def __init__(self, config: Optional[AlignerConfig] = None, registrar: Optional[Registrar] = None,
+                 recovery_prior: Optional[Registrar] = None) -> None:
+        """``registrar``: the tracking CEM's; ``recovery_prior``: the one whose network draws part of the recovery's
+        scatter with ``recovery.prior`` 'network' (default: one loading ``recovery.weights``); built when absent."""
         self.config = config or AlignerConfig()
         reg_prior = "network" if self.config.tracking.prior == "network" else "identity"
         registrar = registrar or Registrar(dataclasses.replace(self.config.registration, prior=reg_prior))
@@ -59,7 +62,7 @@ class ScanAligner:
         self._health = HealthMonitor(self.config.health)
         judge = StepJudge(self.config, self._health)
         self._tracker = Tracker(self.config, registrar, self._spread, judge)
-        self._recovery = Recovery(self.config, self._spread, judge)
+        self._recovery = Recovery(self.config, self._spread, judge, prior_registrar(self.config, recovery_prior))
         self._sweep = SweepDeskewer(self.config.preprocess.deskew, self._preprocessor)
         self._pairs = PairMode(self.config, self._preprocessor, self._checks, self._tracker, self._recovery)
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation

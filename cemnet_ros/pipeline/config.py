@@ -18,6 +18,7 @@ from cemnet_ros.pipeline.preprocess import SAMPLING_METHODS
 from cemnet_ros.schema import param, section
 
 PRIORS = ("motion", "network", "identity")
+RECOVERY_PRIORS = ("uniform", "network")
 DERIVED = ("registration.prior",)  # set from tracking.prior: not a parameter of the pipeline
 
 
@@ -106,8 +107,15 @@ class RecoveryConfig:
     polish_iters: int = param(30, "its iterations at that distance (a hypothesis can be degrees off)", low=1)
     restart_after: int = param(3, "consecutive failed steps after which the map restarts from the scan (lost)",
                                low=1)
+    prior: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_prior "
+                       "candidates drawn from the sampling network's raw N(mu0, sigma0)", choices=RECOVERY_PRIORS)
+    weights: str = param("", "that network's weights (recovery.prior 'network'): '' = the package's, 'official' = "
+                         "the official clean checkpoint shipped converted, or a .npz / official .pth path")
+    allow_pickle: bool = param(False, "allow loading pickled (.pth) recovery weights: only for files you trust")
 
     def __post_init__(self) -> None:
+        if self.prior not in RECOVERY_PRIORS:
+            raise ValueError(f"recovery prior must be one of {RECOVERY_PRIORS}, not {self.prior!r}")
         if self.radius < 0 or self.gap <= 0 or self.polish_distance <= 0:
             raise ValueError("recovery radius must be >= 0, gap and polish_distance > 0")
         if self.points < 32 or self.restart_after < 1 or self.polish_iters < 1:

@@ -1,8 +1,9 @@
 """Recovery (step 5 of the recipe in :mod:`.aligner`): the global CEM search when tracking cannot be trusted.
 
 It runs on the first pair, after a stamp gap, when tracking failed or on request: the search
-(:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation) returns
-distinct hypotheses; each one close to the best in fitness is polished and judged, and an ambiguity check between
+(:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation; with
+``recovery.prior`` 'network' also candidates drawn from the sampling network's prior) returns distinct
+hypotheses; each one close to the best in fitness is polished and judged, and an ambiguity check between
 distinct near-ties keeps a symmetric scene from being published as a confident answer.
 """
 from __future__ import annotations
@@ -10,9 +11,12 @@ from __future__ import annotations
 from typing import Optional
 
 import numpy as np
+import torch
 
+from cemnet_ros.core import Registrar, RegistrationConfig
 from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.core.global_search import global_search
+from cemnet_ros.core.global_search import SearchPrior, global_search
+from cemnet_ros.core.registration import NETWORK_MIN_POINTS
 from cemnet_ros.pipeline.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.frame import Frame
@@ -26,13 +30,25 @@ POLISH_FRACTION = 0.8  # hypotheses whose CEM fitness is this close to the best 
 DISTINCT_M, DISTINCT_RAD = 1.0, np.radians(5.0)  # answers farther apart are distinct hypotheses, not one basin
 
 
+def prior_registrar(config: AlignerConfig, given: Optional[Registrar] = None) -> Optional[Registrar]:
+    """The registrar whose sampling network gives the recovery's prior: None unless ``recovery.prior`` is
+    'network'; then ``given``, or one loading ``recovery.weights``."""
+    rec = config.recovery
+    if rec.prior != "network":
+        return None
+    return given or Registrar(RegistrationConfig(prior="network", weights=rec.weights, allow_pickle=rec.allow_pickle,
+                                                 n_points=rec.points, device=config.registration.device))
+
+
 class Recovery:
     """The global search around a guess, its hypotheses polished and judged, the best one chosen."""
 
-    def __init__(self, config: AlignerConfig, spread: AdaptiveSpread, judge: StepJudge) -> None:
+    def __init__(self, config: AlignerConfig, spread: AdaptiveSpread, judge: StepJudge,
+                 prior: Optional[Registrar] = None) -> None:
         self.config = config
         self.spread = spread
         self.judge = judge
+        self.prior = prior  # its network's mu0, sigma0 draw part of the scatter (None: uniform only)
 
     def recover(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray,
                 T_fallback: Optional[np.ndarray] = None) -> Estimate:
@@ -55,8 +71,9 @@ class Recovery:
         # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
         uniform = voxel_downsample(frame.near, target_map.voxel_size)
         source = apply_transform(T_guess, subsample(uniform, rec.points, "random", seed))
-        hypotheses = global_search(apply_transform(to_units, source), apply_transform(to_units, target), np.zeros(6),
-                                   rec.radius / frame.scale, rec.search, seed=seed)
+        source_units, target_units = apply_transform(to_units, source), apply_transform(to_units, target)
+        hypotheses = global_search(source_units, target_units, np.zeros(6), rec.radius / frame.scale, rec.search,
+                                   seed=seed, prior=self._network_prior(source_units, target_units))
         estimates = []
         for hypothesis in hypotheses:
             if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
@@ -68,6 +85,14 @@ class Recovery:
                                               prediction_std=rec.radius))
         estimates.sort(key=lambda e: -e.signals.fitness)
         return self._resolve_ambiguity(estimates, T_guess)
+
+    def _network_prior(self, source: np.ndarray, target: np.ndarray) -> Optional[SearchPrior]:
+        """The network's raw mu0, sigma0 for the search's clouds in units (None: no network, or too few points)."""
+        if self.prior is None or min(len(source), len(target)) < NETWORK_MIN_POINTS:
+            return None
+        clouds = (torch.as_tensor(cloud, dtype=torch.float32)[None] for cloud in (source, target))
+        result = self.prior.register_batch(*clouds, run_cem=False)
+        return SearchPrior(result.mu0[0], result.sigma0[0])
 
     def _resolve_ambiguity(self, estimates: list[Estimate], T_guess: np.ndarray) -> Estimate:
         """The fittest hypothesis, or among distinct near-ties the one next to the guess (a symmetric scene).
