@@ -43,7 +43,7 @@ class Frame:
     @property
     def polish_voxel(self) -> float:
         """The unit of the polish's pairing distances (m): the voxel, or scale / 100 without a voxel grid."""
-        return self.voxel if self.voxel > 0 else self.scale / 100.0
+        return polish_voxel(self.voxel, self.scale)
 
     def network_units(self, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(to_units, from_units) at this frame's scale, centred on ``centre`` (3,) m."""
@@ -70,6 +70,12 @@ def measured_scale(points_cropped: np.ndarray) -> float:
 def voxel_size(config: PreprocessConfig, scale: float) -> float:
     """The frame voxel (m): ``config.voxel_size``, 0 = auto (scale / 100), negative = no voxel grid (0)."""
     return max(config.voxel_size if config.voxel_size != 0 else scale / 100.0, 0.0)
+
+
+def polish_voxel(voxel: float, scale: float) -> float:
+    """The unit of the polish's pairing distances and of the map's voxels (m): the frame voxel, or scale / 100
+    without a voxel grid."""
+    return voxel if voxel > 0 else scale / 100.0
 
 
 def voxel_cloud(points_cropped: np.ndarray, config: PreprocessConfig, voxel: float) -> np.ndarray:
@@ -147,7 +153,7 @@ class Preprocessor:
         """An empty local map for frames of the adopted units."""
         if self.scale is None:
             raise RuntimeError("no scale adopted yet: a map needs the trajectory's units")
-        voxel = self.voxel if self.voxel > 0 else self.scale / 100.0
+        voxel = polish_voxel(self.voxel, self.scale)
         max_range = self.config.preprocess.max_range
         return VoxelMap(voxel * self.config.map.voxel_factor, self.config.map.points_per_voxel,
                         max_range if max_range > 0 else 10.0 * self.scale)

@@ -22,7 +22,7 @@ from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.frame import Frame
 from cemnet_ros.pipeline.health import disagreement
 from cemnet_ros.pipeline.preprocess import subsample, voxel_downsample
-from cemnet_ros.pipeline.tracking import WIDER_LOOK, map_sample, wide_polish
+from cemnet_ros.pipeline.tracking import PREDICTION_SPREADS, map_sample, wide_polish
 from cemnet_ros.pipeline.verdict import Estimate, StepJudge
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 
@@ -113,7 +113,7 @@ class Recovery:
         nearest = min(ties, key=lambda e: e.offset_from(T_guess)[0])
         metres, radians = nearest.offset_from(T_guess)
         summary = f"{len(ties)} distinct hypotheses within {ratio:.2f} of the best fitness"
-        if metres <= WIDER_LOOK * translation and radians <= WIDER_LOOK * rotation:
+        if metres <= PREDICTION_SPREADS * translation and radians <= PREDICTION_SPREADS * rotation:
             nearest.notes.append(f"symmetric scene: {summary}, the one next to the motion prediction kept")
             return nearest
         best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")

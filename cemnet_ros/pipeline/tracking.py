@@ -22,7 +22,7 @@ from cemnet_ros.pipeline.verdict import Estimate, StepJudge
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 TRACKING_PAIRING = 3.0  # frame voxels: the tracking polish pairs within the adaptive spread, at most this far
-WIDER_LOOK = 3.0  # a polish this many spreads from the prediction: the motion model was wrong, look wider
+PREDICTION_SPREADS = 3.0  # an answer further than this many tracking spreads is not explained by the prediction
 
 
 def map_sample(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, n: int,
@@ -72,7 +72,7 @@ class Tracker:
         max_distance = float(np.clip(translation, 2.0 * voxel, TRACKING_PAIRING * voxel))
         polish = point_to_plane_icp(target_map, frame.polish, T_cem, max_distance, cfg.polish.iters)
         metres, radians = disagreement(T_predicted, polish.T_target_source)
-        if metres > WIDER_LOOK * translation or radians > WIDER_LOOK * rotation:
+        if metres > PREDICTION_SPREADS * translation or radians > PREDICTION_SPREADS * rotation:  # look wider
             polish = wide_polish(cfg, frame, target_map, polish.T_target_source)
         metres, radians = disagreement(T_cem, polish.T_target_source)
         if self.judge.health.disagree(metres, radians, self.judge.resolution(frame)):
