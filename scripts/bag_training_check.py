@@ -127,8 +127,8 @@ def registered(registration: RegistrationConfig, sources: torch.Tensor, targets:
     return {key: np.concatenate([getattr(part, key) for part in parts]) for key in ("rotation", "translation")}
 
 
-def evaluate(priors: dict[str, RegistrationConfig], bag: Path, seed: int) -> list[dict]:
-    """One row per (prior, method): the prior alone, then each CEM of :data:`CEMS` started from it."""
+def evaluate(priors: dict[str, RegistrationConfig], bag: Path, seed: int, cems: dict) -> list[dict]:
+    """One row per (prior, method): the prior alone, then each CEM of ``cems`` started from it."""
     sources, targets, truth, scale = evaluation_pairs(bag, seed)
     print(f"{bag}: {len(sources)} pairs, scale {scale:.2f} m per unit", flush=True)
     rows = []
@@ -138,7 +138,7 @@ def evaluate(priors: dict[str, RegistrationConfig], bag: Path, seed: int) -> lis
         else:  # N(0, I): its mean is the identity
             alone = {"rotation": np.repeat(np.eye(3)[None], len(truth), 0), "translation": np.zeros((len(truth), 3))}
         rows.append({"prior": name, "method": "prior mu0 alone", **errors(alone, truth, scale)})
-        for method, cem in CEMS.items():
+        for method, cem in cems.items():
             result = registered(replace(registration, cem=cem), sources, targets, run_cem=True)
             rows.append({"prior": name, "method": method, **errors(result, truth, scale)})
             print(rows[-1], flush=True)
@@ -161,6 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--weights", nargs="*", default=[], help="evaluate: NAME=PATH of trained networks")
     parser.add_argument("--seed", type=int, default=123, help="the training run's seed (untrained weights) and "
                                                               "the pairs' seed")
+    parser.add_argument("--cems", action=argparse.BooleanOptionalAction, default=True,
+                        help="evaluate: also the CEMs started from each prior (--no-cems: the priors alone)")
     parser.add_argument("--baselines", action=argparse.BooleanOptionalAction, default=True,
                         help="evaluate: also the untrained network, the package weights and the identity prior")
     args = parser.parse_args(argv)
@@ -175,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
         priors.update({"untrained network": RegistrationConfig(weights=str(untrained)),
                        "package weights (ModelNet40)": RegistrationConfig(),
                        "identity N(0, I)": RegistrationConfig(prior="identity")})
-    rows = evaluate(priors, args.bag, args.seed)
+    rows = evaluate(priors, args.bag, args.seed, CEMS if args.cems else {})
     atomic_write_text(args.out / "priors.json", json.dumps(rows, indent=2) + "\n")
     atomic_write_text(args.out / "priors.md", markdown(rows))
     print(markdown(rows))

@@ -2,12 +2,15 @@
 """Does a learned prior pay in the recovery's global search? (issue 12)
 
 The robustness benchmark's large-motion pairs (``cemnet_ros.bench.pairs``: courtyard, yaw any, |t| up to 10 m),
-each through a fresh ``ScanAligner`` per configuration: the first scan, then the second 0.1 s later (a recovery:
+or (``--bag``) such motions between the scans of a bag with ground truth, each through a fresh ``ScanAligner`` per
+configuration: the first scan, then the second 0.1 s later (a recovery:
 "first pair"). All configurations see the same pairs in the same run, interleaved pair by pair (the order
 rotating) so that the machine's load hits them alike: ``uniform-N``, a uniform scatter of N (the default
 ``recovery.search.n_scatter``, then ``--uniform-fractions`` of it: 1/2, 1/4); ``network+N``, the network's raw
-N(mu0, sigma0) (``--weights``) drawing ``--n-prior`` candidates on top of a uniform N (``--prior-fractions``: 1/4,
-1/2); ``oracle+N`` (``--oracle``, beside the smallest), a prior at the true motion: the most a network could give.
+N(mu0, sigma0) (``--weights NAME=PATH ...``, one set of variants per network) drawing ``--n-prior`` candidates on
+top of a uniform N (``--prior-fractions``: 1/4, 1/2); ``oracle+N`` (``--oracle``, beside the smallest), a prior at
+the true motion: the most a network could give; ``--lean``: each of them again with fewer seeds, resampled
+candidates and hypotheses (what a prior that is right could afford).
 
 ``recovery.search.time_budget_s`` is ``--time-budget`` (default: the schema's maximum): the sizes decide the work,
 not the machine's load. Issue 12's criterion: a prior pays if it reaches the default's recall at <= 0.5x its time
@@ -15,7 +18,7 @@ or a higher recall than a uniform scatter that took at least as long (by the rat
 both, each against the default). Timings on a shared machine are noisy.
 
     python scripts/bench_recovery_prior.py --pairs 2 --seeds 0                  # a smoke run
-    python scripts/bench_recovery_prior.py --pairs 20 --seeds 0 1 --weights W.npz --out results/recovery_prior.json
+    python scripts/bench_recovery_prior.py --pairs 20 --seeds 0 1 --weights scan=scan --out results/recovery_prior.json
 """
 from __future__ import annotations
 
@@ -36,7 +39,7 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 
 from cemnet_ros.bench import metrics  # noqa: E402
 from cemnet_ros.bench.odometry import Output  # noqa: E402
-from cemnet_ros.bench.pairs import large_motion_pairs, pair_record  # noqa: E402
+from cemnet_ros.bench.pairs import bag_pairs, large_motion_pairs, pair_record  # noqa: E402
 from cemnet_ros.bench.streams import run_stream  # noqa: E402
 from cemnet_ros.core.config import GlobalSearchConfig  # noqa: E402
 from cemnet_ros.core.geometry import action_to_matrix_np, matrix_to_action_np  # noqa: E402
@@ -46,6 +49,7 @@ from cemnet_ros.pipeline.aligner import ScanAligner  # noqa: E402
 from cemnet_ros.pipeline.config import AlignerConfig  # noqa: E402
 from cemnet_ros.pipeline.recovery import prior_registrar  # noqa: E402
 
+LEAN = {"n_seeds": 4, "n_per_seed": 25, "n_hypotheses": 2}  # vs the defaults 16, 50, 4
 MAX_TIME_BUDGET = 60.0  # the schema's upper bound of recovery.search.time_budget_s
 NOISE = "timings noisy, machine shared"
 DEFINITIONS = "\n".join([
@@ -66,24 +70,31 @@ class Variant:
     name: str
     n_scatter: int
     prior: str  # "uniform", "network" or "oracle"
+    weights: str = ""  # the network's: a name of --weights
+    lean: bool = False  # the later stages cut to LEAN (a prior that is right needs fewer seeds and hypotheses)
 
 
-def variants(default_scatter: int, uniform: list[float], prior: list[float], oracle: bool) -> list[Variant]:
-    """The default uniform scatter first, then those ``uniform`` fractions of it; the network prior beside uniform
-    scatters of the ``prior`` fractions; the oracle beside the smallest of them."""
+def variants(default_scatter: int, uniform: list[float], prior: list[float], oracle: bool,
+             weights: dict[str, str], lean: bool) -> list[Variant]:
+    """The default uniform scatter first, then those ``uniform`` fractions of it; each network prior beside
+    uniform scatters of the ``prior`` fractions; the oracle beside the smallest of them; with ``lean``, each
+    but the default again with the later stages cut to :data:`LEAN`."""
     size = {f: max(1, round(default_scatter * f)) for f in uniform + prior}
     out = [Variant(f"uniform-{n}", n, "uniform") for n in dict.fromkeys([default_scatter, *map(size.get, uniform)])]
     beside = list(dict.fromkeys(size[f] for f in prior))
-    out += [Variant(f"network+{n}", n, "network") for n in beside]
-    return out + ([Variant(f"oracle+{min(beside)}", min(beside), "oracle")] if oracle else [])
+    out += [Variant(f"{name}+{n}", n, "network", name) for name in weights for n in beside]
+    out += [Variant(f"oracle+{min(beside)}", min(beside), "oracle")] if oracle else []
+    return out + ([dataclasses.replace(v, name=f"lean {v.name}", lean=True) for v in out[1:]] if lean else [])
 
 
 def config_for(variant: Variant, args: argparse.Namespace) -> AlignerConfig:
     """The node's defaults, with this variant's scatter and prior (the oracle plays the network's part)."""
     base = AlignerConfig()
     search = dataclasses.replace(base.recovery.search, n_scatter=variant.n_scatter, n_prior=args.n_prior,
-                                 prior_scale=args.prior_scale, time_budget_s=args.time_budget)
-    recovery = dataclasses.replace(base.recovery, search=search, weights=args.weights, allow_pickle=args.allow_pickle,
+                                 prior_scale=args.prior_scale, time_budget_s=args.time_budget,
+                                 **(LEAN if variant.lean else {}))
+    recovery = dataclasses.replace(base.recovery, search=search, weights=args.weights.get(variant.weights, ""),
+                                   allow_pickle=args.allow_pickle,
                                    prior="uniform" if variant.prior == "uniform" else "network")
     return dataclasses.replace(base, recovery=recovery)
 
@@ -139,12 +150,12 @@ class PriorOdometry:
         return metrics.relative_error(units @ action_to_matrix_np(self.prior.mu0) @ np.linalg.inv(units), truth)
 
 
-def run_pair(pair, variant: Variant, config: AlignerConfig, network, oracle_sigma: np.ndarray) -> dict:
+def run_pair(pair, variant: Variant, config: AlignerConfig, networks: dict, oracle_sigma: np.ndarray) -> dict:
     """The pair through a fresh aligner: the second scan's step record, with the prior's own error."""
     built: list[PriorOdometry] = []
 
     def factory(max_range: float) -> PriorOdometry:
-        built.append(PriorOdometry(config, variant, network, pair.truth, oracle_sigma))
+        built.append(PriorOdometry(config, variant, networks.get(variant.weights), pair.truth, oracle_sigma))
         return built[-1]
 
     record = pair_record(pair, run_stream(factory, 100.0, [pair.first, pair.second], [0, pair.gap]))
@@ -152,13 +163,14 @@ def run_pair(pair, variant: Variant, config: AlignerConfig, network, oracle_sigm
     return record
 
 
-def run(pairs: list, chosen: list[Variant], configs: dict, network, args: argparse.Namespace, meta: dict) -> dict:
+def run(pairs: list, chosen: list[Variant], configs: dict, networks: dict, args: argparse.Namespace,
+        meta: dict) -> dict:
     """Every pair through every variant (order rotating pair by pair); results written after each pair."""
     steps: dict[str, list[dict]] = {v.name: [] for v in chosen}
     for k, pair in enumerate(pairs):
         start = time.perf_counter()
         for v in chosen[k % len(chosen):] + chosen[:k % len(chosen)]:
-            steps[v.name].append(run_pair(pair, v, configs[v.name], network, args.oracle_sigma))
+            steps[v.name].append(run_pair(pair, v, configs[v.name], networks, args.oracle_sigma))
         log(f"pair {k + 1}/{len(pairs)} {pair.name}: {time.perf_counter() - start:.0f} s")
         write_results(args.out, meta, chosen, steps)
     return steps
@@ -224,8 +236,9 @@ def write_results(out: Path, meta: dict, chosen: list[Variant], steps: dict) -> 
     """JSON (everything) and markdown (the table and the verdicts) beside it, both atomically; the markdown."""
     summary = summaries(chosen, steps)
     lines = verdicts(chosen, summary) if all(steps.values()) else []
-    markdown = "\n\n".join([f"{len(steps[chosen[0].name])} pairs, seeds {meta['seeds']}, weights "
-                            f"{meta['weights'] or '(package default)'}; {NOISE}",
+    weights = ", ".join(f"{name} = {path or '(package default)'}" for name, path in meta["weights"].items())
+    markdown = "\n\n".join([f"{len(steps[chosen[0].name])} pairs ({meta['pairs_from']}), seeds {meta['seeds']}; "
+                            f"weights: {weights}; {NOISE}",
                             table(chosen, summary, meta["n_prior"]), "\n".join(lines), DEFINITIONS]) + "\n"
     configs = {v.name: {"variant": dataclasses.asdict(v), "summary": summary[v.name], "steps": steps[v.name]}
                for v in chosen}
@@ -243,7 +256,11 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
                         help="uniform scatters besides the default, as fractions of it (default 0.5 0.25)")
     parser.add_argument("--prior-fractions", type=float, nargs="+", default=[0.25, 0.5],
                         help="the uniform scatters beside the prior, as fractions of the default (default 0.25 0.5)")
-    parser.add_argument("--weights", default="", help="the network's weights ('' = the package's; 'official'; path)")
+    parser.add_argument("--weights", nargs="+", default=["network="], metavar="NAME=PATH",
+                        help="the networks compared, each NAME=PATH (PATH '' = the package's weights; 'official'; "
+                        "a file; default: network=)")
+    parser.add_argument("--bag", type=Path, help="pairs from this bag's scans (it needs ground truth) instead of the "
+                        "ray-cast large-motion pairs: --pairs per seed, as cemnet_ros.bench.pairs.bag_pairs makes them")
     parser.add_argument("--allow-pickle", action="store_true", help="allow pickled (.pth) weights you trust")
     parser.add_argument("--n-prior", type=int, default=search.n_prior, help=f"prior draws (default {search.n_prior})")
     parser.add_argument("--prior-scale", type=float, default=search.prior_scale, help="k: sigma0's widening")
@@ -251,6 +268,7 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
                         help="add a prior at the true motion (default: on)")
     parser.add_argument("--oracle-sigma", type=float, nargs=6, default=[0.05, 0.02, 0.02, 0.05, 0.05, 0.01],
                         help="its spread [euler z, y, x (rad), tx, ty, tz (units)]")
+    parser.add_argument("--lean", action="store_true", help=f"also each variant but the default with {LEAN}")
     parser.add_argument("--time-budget", type=float, default=MAX_TIME_BUDGET,
                         help=f"recovery.search.time_budget_s (default {MAX_TIME_BUDGET}: the sizes decide)")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_recovery_prior.json",
@@ -259,26 +277,36 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     if args.pairs < 1 or args.n_prior < 0 or min(args.prior_scale, *args.uniform_fractions, *args.prior_fractions) <= 0:
         parser.error("--pairs must be >= 1, --n-prior >= 0, --prior-scale and the fractions > 0")
     args.oracle_sigma = np.asarray(args.oracle_sigma, dtype=np.float64)
+    if not all("=" in w for w in args.weights):
+        parser.error("--weights takes NAME=PATH entries")
+    args.weights = dict(w.split("=", 1) for w in args.weights)
     return args
 
 
 def main(argv: Optional[list[str]] = None) -> int:
     args = parse_args(argv)
-    chosen = variants(GlobalSearchConfig().n_scatter, args.uniform_fractions, args.prior_fractions, args.oracle)
+    chosen = variants(GlobalSearchConfig().n_scatter, args.uniform_fractions, args.prior_fractions, args.oracle,
+                      args.weights, args.lean)
     configs = {v.name: config_for(v, args) for v in chosen}
-    network = prior_registrar(configs[next(v.name for v in chosen if v.prior == "network")])
+    networks = {v.weights: prior_registrar(configs[v.name]) for v in chosen if v.prior == "network"}
     meta = {"argv": sys.argv[1:] if argv is None else list(argv), "seeds": args.seeds, "pairs_per_seed": args.pairs,
-            "weights": args.weights, "n_prior": args.n_prior, "prior_scale": args.prior_scale,
+            "weights": args.weights, "pairs_from": str(args.bag or "ray-cast large-motion pairs"),
+            "n_prior": args.n_prior, "prior_scale": args.prior_scale,
             "oracle_sigma": args.oracle_sigma, "time_budget_s": args.time_budget, "timings": NOISE,
             "variants": [dataclasses.asdict(v) for v in chosen], "python": platform.python_version(),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    log(f"variants: {', '.join(v.name for v in chosen)}; ray-casting {args.pairs} pairs per seed {args.seeds}")
+    log(f"variants: {', '.join(v.name for v in chosen)}; {args.pairs} pairs per seed {args.seeds} from "
+        f"{args.bag or 'ray-casting'}")
+
+    def make_pairs(n: int, seed: int) -> list:
+        return bag_pairs(args.bag, n, seed) if args.bag else large_motion_pairs(n, seed)
+
     pairs = [dataclasses.replace(pair, name=f"s{seed}/{pair.name}")
-             for seed in args.seeds for pair in large_motion_pairs(args.pairs, seed)]
-    warm = large_motion_pairs(1, max(args.seeds) + 1000)[0]
+             for seed in args.seeds for pair in make_pairs(args.pairs, seed)]
+    warm = make_pairs(1, max(args.seeds) + 1000)[0]
     for variant in chosen:  # untimed: kernels compiled, the network's first call paid
-        run_pair(warm, variant, configs[variant.name], network, args.oracle_sigma)
-    steps = run(pairs, chosen, configs, network, args, meta)
+        run_pair(warm, variant, configs[variant.name], networks, args.oracle_sigma)
+    steps = run(pairs, chosen, configs, networks, args, meta)
     print(write_results(args.out, meta, chosen, steps))
     print(f"wrote {args.out} and {args.out.with_suffix('.md')}")
     return 0

@@ -1,7 +1,8 @@
 """Pair sets: two scans and the true motion between them, each pair through a fresh odometry of each method.
 
 ``kitti_gaps``: every pair (i, i + g) of the full-resolution KITTI sample scans; ``large_motion``: ray-cast
-courtyard pairs, yaw U[-180, 180] deg, |t| U[0, 10] m.
+courtyard pairs, yaw U[-180, 180] deg, |t| U[0, 10] m; ``bag_pairs``: the same kind of motions between the scans
+of a bag with ground truth.
 """
 from __future__ import annotations
 
@@ -24,6 +25,8 @@ from cemnet_ros.data.scenes import (
     random_sensor_pose,
 )
 from cemnet_ros.io.console import progress
+from cemnet_ros.replay.bag_reader import BagReader, SkippedMessage
+from cemnet_ros.train.bag_scans import poses_at
 
 
 @dataclass
@@ -84,4 +87,28 @@ def large_motion_pairs(n: int, seed: int) -> list[Pair]:
         a = lidar_scan(scene, first, lidar, rng).astype(np.float64)
         b = lidar_scan(scene, first @ motion, lidar, rng).astype(np.float64)
         pairs.append(Pair(f"pair{i}", a, b, motion))
+    return pairs
+
+
+def bag_pairs(path: Path, n: int, seed: int, max_translation: float = 10.0) -> list[Pair]:
+    """Large motions between real scans of a bag with ground truth: two scans whose sensors lie at most
+    ``max_translation`` m apart (drawn at random), the second turned about its sensor's z axis by a yaw
+    U[-180, 180] deg (a sensor frame still: only the heading changes)."""
+    with BagReader(path) as reader:
+        scans = [s for s in reader.scans() if not isinstance(s, SkippedMessage)]
+        gt_stamps, gt_poses, _ = reader.ground_truth()
+    poses = poses_at([s.stamp_ns for s in scans], gt_stamps, gt_poses)
+    if poses is None:
+        raise ValueError(f"{path}: bag pairs need ground truth at every scan")
+    rng, positions = np.random.default_rng(seed), poses[:, :3, 3]
+    pairs = []
+    for k in range(n):
+        i = int(rng.integers(len(scans)))
+        near = np.flatnonzero(np.linalg.norm(positions - positions[i], axis=1) <= max_translation)
+        j = int(rng.choice(near[near != i])) if len(near) > 1 else i
+        spin = np.eye(4)
+        spin[:3, :3] = Rotation.from_euler("z", rng.uniform(-180.0, 180.0), degrees=True).as_matrix()
+        second = scans[j].points.astype(np.float64) @ spin[:3, :3].T
+        truth = np.linalg.inv(poses[i]) @ poses[j] @ np.linalg.inv(spin)
+        pairs.append(Pair(f"pair{k}:{i}-{j}", scans[i].points.astype(np.float64), second, truth))
     return pairs

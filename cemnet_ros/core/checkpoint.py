@@ -23,6 +23,9 @@ PACKAGE_WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 # subset (see cemnet_ros/weights/README.md). The official clean checkpoint, converted, ships beside them.
 DEFAULT_WEIGHTS = PACKAGE_WEIGHTS_DIR / "cemnet_ros_modelnet40_clean.npz"
 OFFICIAL_WEIGHTS = PACKAGE_WEIGHTS_DIR / "official_modelnet40_clean.npz"
+# Trained on LiDAR scans for the node's recovery (ray-cast courtyard scans of 16-128 beams and the 6 KITTI scans).
+SCAN_WEIGHTS = PACKAGE_WEIGHTS_DIR / "cemnet_ros_lidar_scans.npz"
+NAMED_WEIGHTS = {"": DEFAULT_WEIGHTS, "official": OFFICIAL_WEIGHTS, "scan": SCAN_WEIGHTS}
 
 _OFFICIAL_PREFIXES = (("coarse_policy.emb_nn.", "embedding."), ("coarse_policy.nn.", "sigma_head."))
 _OFFICIAL_IGNORED = ("coarse_policy.reflect",)
@@ -93,9 +96,10 @@ def load_weights(path: str | os.PathLike, allow_pickle: bool = False) -> tuple[d
 
 
 def load_network(path: str | os.PathLike | None = None, allow_pickle: bool = False) -> SamplingNetwork:
-    """A :class:`SamplingNetwork` with weights from ``path``: a file, None or "" (the package's default weights)
-    or ``"official"`` (the official ModelNet40 clean checkpoint, converted, shipped in the package)."""
-    path = DEFAULT_WEIGHTS if path is None or str(path) == "" else OFFICIAL_WEIGHTS if str(path) == "official" else path
+    """A :class:`SamplingNetwork` with weights from ``path``: a file, None or "" (the package's default weights),
+    ``"official"`` (the official ModelNet40 clean checkpoint, converted) or ``"scan"`` (the package's LiDAR scan
+    weights), all shipped in the package."""
+    path = NAMED_WEIGHTS.get("" if path is None else str(path), path)
     state, _ = load_weights(path, allow_pickle)
     network = SamplingNetwork()
     try:

@@ -77,8 +77,9 @@ class RegistrationConfig:
     prior: str = param("network", "where mu0/sigma0 come from: the sampling network, or N(0, prior_sigma) "
                        "(the paper's no-network ablation)", choices=("network", "identity"))
     prior_sigma: Six = param((1.0,) * 6, "spread of the identity prior (rad, network units)", low=0.0)
-    weights: str = param("", "sampling network weights: '' = the package's, 'official' = the official clean "
-                         "checkpoint shipped converted, or a .npz / official .pth path")
+    weights: str = param("", "sampling network weights: '' = the package's (ModelNet40), 'official' = the "
+                         "official clean checkpoint shipped converted, 'scan' = the package's LiDAR scan weights, or "
+                         "a .npz / official .pth path")
     allow_pickle: bool = param(False, "allow loading pickled (.pth) weights: only for files you trust")
     batchnorm: str = param("running", "BatchNorm statistics of the network ('batch' as the reference, which "
                            "never calls eval())", choices=("batch", "running"))

@@ -5,7 +5,7 @@ official checkpoints load into it (see :mod:`cemnet_ros.core.checkpoint` for the
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -74,6 +74,14 @@ def feature_distances(src_emb: torch.Tensor, tgt_emb: torch.Tensor) -> torch.Ten
     return d2.clamp_min(1e-12).sqrt()
 
 
+class Prediction(NamedTuple):
+    """The sampling network's output: the CEM's initial Gaussian and the soft matching mu0 comes from."""
+
+    mu0: torch.Tensor  # (B, 6) [z, y, x, tx, ty, tz]
+    sigma0: torch.Tensor  # (B, 6) in (0, 1)
+    match: torch.Tensor  # (B, n, m) rows: a source point's weights over the target points
+
+
 class SamplingNetwork(nn.Module):
     """Predicts the CEM's initial Gaussian: mu0 = [z, y, x, tx, ty, tz] and sigma0 in (0, 1)^6."""
 
@@ -112,6 +120,11 @@ class SamplingNetwork(nn.Module):
 
     def forward(self, source: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """source (B, n, 3), target (B, m, 3) -> mu0 (B, 6), sigma0 (B, 6)."""
+        prediction = self.predict(source, target)
+        return prediction.mu0, prediction.sigma0
+
+    def predict(self, source: torch.Tensor, target: torch.Tensor) -> Prediction:
+        """mu0, sigma0 and the soft matching (B, n, m) behind mu0 (what self-supervised training teaches)."""
         src_emb = self.embedding(source, self._conv_bn_relu)
         tgt_emb = self.embedding(target, self._conv_bn_relu)
         match = torch.softmax(-feature_distances(src_emb, tgt_emb), dim=2)  # (B, n, m)
@@ -120,4 +133,4 @@ class SamplingNetwork(nn.Module):
         h = torch.cat([src_emb.amax(dim=1), tgt_emb.amax(dim=1)], 1)  # = max over cat(src, tgt)
         for layer in self.sigma_head:
             h = self._norm(layer, h) if isinstance(layer, nn.BatchNorm1d) else layer(h)
-        return mu0, torch.sigmoid(h)
+        return Prediction(mu0, torch.sigmoid(h), match)

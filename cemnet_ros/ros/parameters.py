@@ -8,10 +8,9 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
+from cemnet_ros.core.checkpoint import NAMED_WEIGHTS
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.ros.node_config import NodeConfig, configs_from_parameters, node_parameters
-
-NAMED_WEIGHTS = ("", "official")
 
 
 class ConfigError(ValueError):
@@ -51,16 +50,17 @@ def declare_and_read(node: Node) -> tuple[NodeConfig, AlignerConfig]:
 
 def check_weights(node: Node, pipeline: AlignerConfig) -> None:
     """A weights path that does not exist is fatal where the network is used, a warning where it is not."""
-    weights = pipeline.registration.weights
-    if weights in NAMED_WEIGHTS:
-        return
-    used = pipeline.tracking.prior == "network"
-    if not Path(weights).is_file():
-        if used:
-            raise ConfigError(f"parameter registration.weights: no such file {weights!r} (tracking.prior is "
-                              "'network'; '' = the package's weights, 'official' = the official checkpoint)")
-        node.get_logger().warn(f"registration.weights {weights!r} does not exist; it is not used either "
-                               f"(tracking.prior is {pipeline.tracking.prior!r})")
-    elif not used:
-        node.get_logger().warn(f"registration.weights {weights!r} is not used: tracking.prior is "
-                               f"{pipeline.tracking.prior!r}, not 'network'")
+    for name, weights, user, prior in (
+            ("registration.weights", pipeline.registration.weights, "tracking.prior", pipeline.tracking.prior),
+            ("recovery.weights", pipeline.recovery.weights, "recovery.prior", pipeline.recovery.prior)):
+        if weights in NAMED_WEIGHTS:
+            continue
+        used = prior == "network"
+        if not Path(weights).is_file():
+            if used:
+                raise ConfigError(f"parameter {name}: no such file {weights!r} ({user} is 'network'; '' = the "
+                                  "package's weights, 'official' = the official checkpoint, 'scan' = the package's "
+                                  "LiDAR scan weights)")
+            node.get_logger().warn(f"{name} {weights!r} does not exist; it is not used either ({user} is {prior!r})")
+        elif not used:
+            node.get_logger().warn(f"{name} {weights!r} is not used: {user} is {prior!r}, not 'network'")

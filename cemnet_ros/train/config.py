@@ -16,7 +16,11 @@ from cemnet_ros.eval.protocol import ProtocolConfig
 from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig, odometry_registration
 from cemnet_ros.schema import build, param, section
 
+from .known_motion import KnownMotionConfig
+
 BEST_METRICS = ("val_mae_r_deg", "val_prior_mae_r_deg", "val_loss")
+OBJECTIVES = ("paper", "known_motion")
+CENTRES = ("sensor", "centroid")
 LR_SCHEDULES = ("constant", "cosine")
 
 
@@ -45,6 +49,9 @@ class ScanPairConfig:
     crop_deg: float = param(90.0, "partial crop: each cloud loses a random azimuth sector of up to this many "
                             "degrees", low=0.0, high=360.0)
     noise: float = param(0.02, "Gaussian noise (m) added to every coordinate of both clouds", low=0.0)
+    centre: str = param("sensor", "origin of the network units: 'sensor' (the target's sensor, as the node's "
+                        "recovery centres its search: the motion's yaw turns about the sensor) or 'centroid' (the "
+                        "target's centroid, as the tracking CEM centres its clouds)", choices=CENTRES)
 
     def __post_init__(self) -> None:
         if self.n_points < 32 or self.max_gap < 1:
@@ -53,6 +60,8 @@ class ScanPairConfig:
             raise ValueError("scans.consecutive must lie in [0, 1] and scans.crop_deg in [0, 360]")
         if self.radius < 0 or self.noise < 0:
             raise ValueError("scans.radius and scans.noise must be >= 0")
+        if self.centre not in CENTRES:
+            raise ValueError(f"scans.centre must be one of {CENTRES}, not {self.centre!r}")
 
 
 @dataclass
@@ -61,9 +70,15 @@ class TrainConfig:
 
     data: str = param("", "an .npz of shapes (points (S, n, 3) [+ labels, split]) or a folder of scans")
     bag: str = param("", "instead of data: a rosbag2 bag (.mcap/.db3 file or folder) of PointCloud2 scans, "
-                     "trained on in the node's units")
-    topic: str = param("", "the bag's PointCloud2 topic; '' = its only one")
+                     "trained on in the node's units; several bags: comma-separated, each in its own units")
+    topic: str = param("", "the bags' PointCloud2 topic; '' = each bag's only one")
     out_dir: str = param("results/train", "output folder (checkpoints, log.csv, curves.png, config.json)")
+    objective: str = param("paper", "'paper': the CEM in the loop, Geman-McClure losses of mu_T and mu0 "
+                           "(unsupervised); 'known_motion': the sampling network alone, taught the random motion of "
+                           "pairs made of one cloud (self-supervised, no CEM in the loop: a step is ~10x cheaper)",
+                           choices=OBJECTIVES)
+    known_motion: KnownMotionConfig = section(KnownMotionConfig, "objective 'known_motion': its terms' weights and "
+                                              "scales")
     # Optimisation.
     epochs: int = param(50, "training epochs (paper: 50)", low=1)
     batch_size: int = param(32, "global batch (paper: 32); split evenly over DDP ranks", low=2)
@@ -126,6 +141,8 @@ class TrainConfig:
             raise ValueError(f"lr_schedule must be one of {LR_SCHEDULES}, not {self.lr_schedule!r}")
         if self.val_batchnorm not in ("running", "batch"):
             raise ValueError(f"val_batchnorm must be 'running' or 'batch', not {self.val_batchnorm!r}")
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"objective must be one of {OBJECTIVES}, not {self.objective!r}")
         if self.best_metric not in BEST_METRICS:
             raise ValueError(f"best_metric must be one of {BEST_METRICS}, not {self.best_metric!r}")
         if self.limit_train < 0 or self.limit_val < 0:
@@ -159,3 +176,8 @@ def epoch_learning_rate(config: TrainConfig, epoch: int) -> float:
     progress = (epoch - 1) / (config.epochs - 1)
     low = config.lr / 100.0
     return low + 0.5 * (config.lr - low) * (1.0 + math.cos(math.pi * progress))
+
+
+def bag_paths(config: TrainConfig) -> list[str]:
+    """The bags of ``config.bag`` (comma-separated)."""
+    return [path.strip() for path in config.bag.split(",") if path.strip()]

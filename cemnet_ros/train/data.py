@@ -12,14 +12,15 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch.utils.data import Dataset
 from tqdm import tqdm
 
 from cemnet_ros.eval.protocol import ProtocolConfig, load_shapes, make_pair
 from cemnet_ros.io.pointcloud_files import read_points
 
 from .bag_scans import read_bag_scans, split_in_time
-from .config import TrainConfig
-from .scan_pairs import ScanPairDataset
+from .config import TrainConfig, bag_paths
+from .scan_pairs import BagsPairs, ScanPairDataset
 from .seeded_pairs import SeededPairs, pair_item
 
 SCAN_SUFFIXES = (".ply", ".pcd", ".npy", ".npz", ".bin")
@@ -44,7 +45,7 @@ class PairDataset(SeededPairs):
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         pair = make_pair(self.shapes[index], self.rng(index), self.protocol)
-        return pair_item(pair.source, pair.target, pair.rotation, pair.translation)
+        return pair_item(pair.source, pair.target, pair.rotation, pair.translation, known_motion=True)
 
 
 def normalise_unit_sphere(points: np.ndarray) -> np.ndarray:
@@ -106,7 +107,7 @@ def _limit(indices: np.ndarray, limit: int) -> np.ndarray:
     return indices[:limit] if limit > 0 else indices
 
 
-def build_datasets(config: TrainConfig) -> tuple[PairDataset | ScanPairDataset, PairDataset | ScanPairDataset]:
+def build_datasets(config: TrainConfig) -> tuple[Dataset, Dataset]:
     """(train, val) pair datasets from ``config.data`` or ``config.bag``: validation holds out shapes of the
     *train* split (the test split stays untouched for the final evaluation), or the last scans of the bag."""
     if config.bag:
@@ -129,10 +130,15 @@ def build_datasets(config: TrainConfig) -> tuple[PairDataset | ScanPairDataset, 
             PairDataset(shapes[val_idx], config.protocol, config.seed, fixed=True))
 
 
-def build_bag_datasets(config: TrainConfig) -> tuple[ScanPairDataset, ScanPairDataset]:
-    """(train, val) scan pairs of ``config.bag`` in the node's units; validation holds out the last scans."""
-    scans = read_bag_scans(config.bag, config.topic, config.preprocess, config.progress)
-    train_idx, val_idx = split_in_time(len(scans), config.val_fraction)
-    train_idx, val_idx = _limit(train_idx, config.limit_train), _limit(val_idx, config.limit_val)
-    return (ScanPairDataset(scans.part(train_idx), config.preprocess, config.scans, config.seed),
-            ScanPairDataset(scans.part(val_idx), config.preprocess, config.scans, config.seed, fixed=True))
+def build_bag_datasets(config: TrainConfig) -> tuple[ScanPairDataset | BagsPairs, ScanPairDataset | BagsPairs]:
+    """(train, val) scan pairs of the bags of ``config.bag``, each in its own units (as the node measures them);
+    validation holds out the last scans of each bag."""
+    train, val = [], []
+    for k, bag in enumerate(bag_paths(config)):
+        scans = read_bag_scans(bag, config.topic, config.preprocess, config.progress)
+        train_idx, val_idx = split_in_time(len(scans), config.val_fraction)
+        train_idx, val_idx = _limit(train_idx, config.limit_train), _limit(val_idx, config.limit_val)
+        seed = config.seed + k  # distinct draws for the same scan index of another bag
+        train.append(ScanPairDataset(scans.part(train_idx), config.preprocess, config.scans, seed))
+        val.append(ScanPairDataset(scans.part(val_idx), config.preprocess, config.scans, seed, fixed=True))
+    return (train[0], val[0]) if len(train) == 1 else (BagsPairs(train), BagsPairs(val))

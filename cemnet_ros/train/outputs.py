@@ -9,7 +9,8 @@ from typing import Any
 
 from cemnet_ros.io.atomic import atomic_write_bytes, atomic_write_text
 
-CSV_FIELDS = ("epoch", "global_step", "train_loss", "train_loss_final", "train_loss_prior", "skipped_batches",
+CSV_FIELDS = ("epoch", "global_step", "train_loss", "train_loss_final", "train_loss_prior", "train_loss_match",
+              "train_loss_sigma", "skipped_batches",
               "val_loss", "val_mae_r_deg", "val_mae_t", "val_recall", "val_prior_mae_r_deg", "val_prior_mae_t",
               "lr", "train_time_s", "val_time_s", "best")
 
@@ -41,9 +42,10 @@ def write_curves(out_dir: Path, rows: list[dict[str, Any]]) -> None:
 
     fig, (ax_loss, ax_val) = plt.subplots(1, 2, figsize=(11, 4))
     for key, label in (("train_loss", "total"), ("train_loss_final", "final (mu_T)"),
-                       ("train_loss_prior", "prior (mu_0)"), ("val_loss", "val final")):
+                       ("train_loss_prior", "prior (mu_0)"), ("train_loss_match", "matching"),
+                       ("train_loss_sigma", "sigma_0 NLL"), ("val_loss", "val final")):
         ax_loss.plot(*_series(rows, key), marker=".", label=label)
-    ax_loss.set(xlabel="epoch", ylabel="Geman-McClure loss", title="training loss")
+    ax_loss.set(xlabel="epoch", ylabel="loss (objective's terms)", title="training loss")
     ax_loss.legend()
     for key, label in (("val_mae_r_deg", "CEM (mu_T)"), ("val_prior_mae_r_deg", "prior (mu_0)")):
         ax_val.plot(*_series(rows, key), marker=".", label=label)

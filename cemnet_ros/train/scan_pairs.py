@@ -12,6 +12,7 @@ from typing import Optional
 
 import numpy as np
 import torch
+from torch.utils.data import Dataset
 
 from cemnet_ros.core.geometry import action_to_matrix_np, apply_transform
 from cemnet_ros.core.global_search import scatter
@@ -28,11 +29,13 @@ _ONE_CANDIDATE = dataclasses.replace(RecoveryConfig().search, n_scatter=1, n_hyp
 
 @dataclass
 class ScanPair:
-    """Prepared clouds (n, 3) in network units and ``T_target_source`` (4x4, units; None when unknown)."""
+    """Prepared clouds (n, 3) in network units and ``T_target_source`` (4x4, units; None when unknown); one_scan:
+    both clouds come from the same scan, so the truth is the random motion alone (no ground truth needed)."""
 
     source: np.ndarray
     target: np.ndarray
     T_target_source: Optional[np.ndarray]
+    one_scan: bool
 
 
 def recovery_motion(rng: np.random.Generator, radius: float, scale: float) -> np.ndarray:
@@ -76,22 +79,23 @@ class ScanPairDataset(SeededPairs):
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         pair = self.pair(int(index), self.rng(index))
         truth = np.full((4, 4), np.nan) if pair.T_target_source is None else pair.T_target_source
-        return pair_item(pair.source, pair.target, truth[:3, :3], truth[:3, 3])
+        return pair_item(pair.source, pair.target, truth[:3, :3], truth[:3, 3], known_motion=pair.one_scan)
 
     def pair(self, index: int, rng: np.random.Generator) -> ScanPair:
         """Scan ``index`` as the target; the source is a scan up to ``max_gap`` away or the same one, moved by a
         :func:`recovery_motion`; both cropped, cut to the CEM's points, noisy, then put into network units
-        centred on the target's centroid (as the aligner's tracking CEM centres them)."""
+        centred on the target's sensor (as the recovery centres its search) or centroid (``scans.centre``)."""
         scale = self.scans.scale
         other = self._partner(index, rng)
         T_natural = self.scans.relative(index, other)  # metres, the target's from the source's sensor frame
         target = self._cloud(index, rng)
         motion = recovery_motion(rng, self.pairs.radius, scale)
         source = apply_transform(motion, self._cloud(other, rng))
-        to_units, from_units = network_units(scale, target.mean(axis=0))
+        centre = np.zeros(3) if self.pairs.centre == "sensor" else target.mean(axis=0)
+        to_units, from_units = network_units(scale, centre)
         truth = None if T_natural is None else to_units @ T_natural @ np.linalg.inv(motion) @ from_units
         return ScanPair(apply_transform(to_units, source).astype(np.float32),
-                        apply_transform(to_units, target).astype(np.float32), truth)
+                        apply_transform(to_units, target).astype(np.float32), truth, one_scan=other == index)
 
     def _partner(self, index: int, rng: np.random.Generator) -> int:
         """The source scan: ``index`` itself, or (share ``consecutive``; for validation only with ground truth)
@@ -110,3 +114,31 @@ class ScanPairDataset(SeededPairs):
         near = near_points(partial, cfg, self.scans.scale)
         points = exactly(subsample(near, n, cfg.sampling, int(rng.integers(1 << 31))), n, rng)
         return points + rng.normal(0.0, self.pairs.noise, points.shape)
+
+
+class BagsPairs(Dataset):
+    """The pairs of several bags' :class:`ScanPairDataset` one after another (each bag in its own units)."""
+
+    def __init__(self, parts: list[ScanPairDataset]) -> None:
+        self.parts = parts
+        self.starts = np.cumsum([0] + [len(part) for part in parts])
+
+    @property
+    def fixed(self) -> bool:
+        return all(part.fixed for part in self.parts)
+
+    @fixed.setter
+    def fixed(self, value: bool) -> None:
+        for part in self.parts:
+            part.fixed = value
+
+    def set_epoch(self, epoch: int) -> None:
+        for part in self.parts:
+            part.set_epoch(epoch)
+
+    def __len__(self) -> int:
+        return int(self.starts[-1])
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        k = int(np.searchsorted(self.starts, index, side="right")) - 1
+        return self.parts[k][int(index - self.starts[k])]

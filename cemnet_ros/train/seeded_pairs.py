@@ -27,10 +27,13 @@ class SeededPairs(Dataset):
         return np.random.default_rng([self.seed, (VAL_EPOCH if self.fixed else self.epoch) + 1, int(index)])
 
 
-def pair_item(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray
-              ) -> dict[str, torch.Tensor]:
-    """An item: source, target (n, 3) float32; rotation (3, 3) and translation (3,) float64, target ~= R src + t."""
+def pair_item(source: np.ndarray, target: np.ndarray, rotation: np.ndarray, translation: np.ndarray,
+              known_motion: bool) -> dict[str, torch.Tensor]:
+    """An item: source, target (n, 3) float32; rotation (3, 3) and translation (3,) float64, target ~= R src + t;
+    known_motion: whether that truth is the random motion the pair was made with (one cloud and a moved copy),
+    which self-supervised training may learn from, rather than a label (ground truth)."""
     return {"source": torch.as_tensor(source, dtype=torch.float32),
             "target": torch.as_tensor(target, dtype=torch.float32),
             "rotation": torch.as_tensor(rotation, dtype=torch.float64),
-            "translation": torch.as_tensor(translation, dtype=torch.float64)}
+            "translation": torch.as_tensor(translation, dtype=torch.float64),
+            "known_motion": torch.tensor(known_motion)}

@@ -1,8 +1,10 @@
-"""The unsupervised training loop: CEMNet forward, Geman-McClure loss, Adam step; validate, log, checkpoint.
+"""The training loop: loss of the objective, Adam step; validate, log, checkpoint.
 
-Loss per batch (no labels): GM(R_T src + t_T, tgt) + prior_loss_weight * GM(R_0 src + t_0, tgt), with
+Objective ``paper`` (no labels): GM(R_T src + t_T, tgt) + prior_loss_weight * GM(R_0 src + t_0, tgt), with
 (R_T, t_T) the CEM's final mean and (R_0, t_0) the sampling network's prior mean. Gradients reach the
 network through the reparameterised candidates of the CEM (the sparsemax weights see detached scores).
+Objective ``known_motion``: the sampling network alone, taught the random motions the pairs were made with
+(:mod:`.known_motion`).
 Only rank 0 writes files: ``last.npz`` (+ ``last_optim.npz``), ``best.npz``, ``log.csv``, ``curves.png``
 and ``config.json`` in ``config.out_dir``.
 """
@@ -34,9 +36,14 @@ from . import distributed as ddp
 from .checkpoints import load_checkpoint, save_checkpoint
 from .config import TrainConfig, epoch_learning_rate
 from .data import build_datasets
+from .known_motion import known_motion_losses
 from .outputs import CSV_FIELDS, fmt, write_curves, write_log
 
 CHECKPOINT_FORMAT = "cemnet_ros.train/1"
+# Each objective's loss terms and the log.csv columns they are averaged into.
+LOSS_TERMS = {"paper": {"total": "train_loss", "final": "train_loss_final", "prior": "train_loss_prior"},
+              "known_motion": {"total": "train_loss", "match": "train_loss_match", "pose": "train_loss_prior",
+                               "sigma": "train_loss_sigma"}}
 
 
 def derived_seed(*words: int) -> int:
@@ -76,6 +83,8 @@ class Trainer:
     def __init__(self, config: TrainConfig, info: Optional[ddp.DistInfo] = None):
         self.config = config
         self.info = info or ddp.DistInfo(device=ddp.resolve_device(config.device))
+        if config.objective == "known_motion" and self.info.world_size > 1:
+            raise ValueError("objective 'known_motion' trains on one process (DDP wraps the CEM, which it skips)")
         if config.threads > 0:
             torch.set_num_threads(config.threads)
             numba.set_num_threads(min(config.threads, numba.config.NUMBA_NUM_THREADS))
@@ -139,29 +148,38 @@ class Trainer:
         self.train_set.set_epoch(epoch)
         self.sampler.set_epoch(epoch)
         torch.manual_seed(derived_seed(self.config.seed, epoch, self.info.rank))  # CEM noise of this epoch
-        sums = np.zeros(4)  # total, final, prior, batches
+        terms = LOSS_TERMS[self.config.objective]
+        sums = np.zeros(len(terms) + 1)  # the terms, then batches
         skipped = 0
         bar = tqdm(self.train_loader, desc=f"epoch {epoch}", disable=not (self.config.progress and self.info.is_main),
                    dynamic_ncols=True)
         for batch in bar:
-            source, target = batch["source"].to(self.device), batch["target"].to(self.device)
-            out = self.model(source, target)
-            loss, final, prior = unsupervised_loss(source, target, out.mu, out.mu0, self.config)
-            if not self._all_finite(loss):
+            losses = self._losses({k: v.to(self.device) for k, v in batch.items()})
+            if not self._all_finite(losses["total"]):
                 skipped += 1  # every rank skips together (DDP's backward would otherwise hang)
                 continue
             self.optimizer.zero_grad(set_to_none=True)
-            loss.backward()
+            losses["total"].backward()
             self.optimizer.step()
             self.global_step += 1
-            sums += (loss.item(), final.item(), prior.item(), 1.0)
-            bar.set_postfix(loss=f"{sums[0] / sums[3]:.5f}")
+            sums += (*(losses[term].item() for term in terms), 1.0)
+            bar.set_postfix(loss=f"{sums[0] / sums[-1]:.5f}")
         total = ddp.all_reduce_sum([*sums.tolist(), float(skipped)], self.info)
-        if total[4]:
-            warnings.warn(f"epoch {epoch}: skipped {int(total[4])} batch(es) with a non-finite loss")
-        n = max(total[3], 1.0)
-        return {"train_loss": total[0] / n, "train_loss_final": total[1] / n, "train_loss_prior": total[2] / n,
-                "skipped_batches": int(total[4])}
+        if total[-1]:
+            warnings.warn(f"epoch {epoch}: skipped {int(total[-1])} batch(es) with a non-finite loss")
+        n = max(total[-2], 1.0)
+        return {**{column: total[i] / n for i, column in enumerate(terms.values())}, "skipped_batches": int(total[-1])}
+
+    def _losses(self, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The objective's loss terms of one batch (``total`` is the one minimised)."""
+        source, target = batch["source"], batch["target"]
+        if self.config.objective == "known_motion":
+            prediction = self.network.predict(source, target)
+            return known_motion_losses(source, target, batch["rotation"], batch["translation"],
+                                       batch["known_motion"], prediction, self.config.known_motion)
+        out = self.model(source, target)
+        total, final, prior = unsupervised_loss(source, target, out.mu, out.mu0, self.config)
+        return {"total": total, "final": final, "prior": prior}
 
     def _all_finite(self, loss: torch.Tensor) -> bool:
         bad = 0.0 if torch.isfinite(loss).item() else 1.0

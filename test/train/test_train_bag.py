@@ -1,60 +1,30 @@
 """Training from a bag (``cemnet-train --bag``): pairs prepared as the node prepares scans, with the truth they
 claim; training on a tiny ray-cast bag lowers the loss and round-trips its checkpoint; the CLI trains, resumes
-and reports. The bag (8 scans of the courtyard, 16 x 360 rays) is written here, so nothing needs ../shared.
+and reports. The bag (8 scans of the courtyard, 16 x 360 rays) is written by the conftest, so nothing needs ../shared.
 """
 from __future__ import annotations
 
 import csv
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from scipy.spatial import cKDTree
+from tiny_training import bag_config
 
 from cemnet_ros.core.checkpoint import load_network
-from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.core.geometry import apply_transform, matrix_to_action_np
-from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.frame import Preprocessor
-from cemnet_ros.replay.bag_io import BagWriter
+from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.tools import train_cli
-from cemnet_ros.train.config import ScanPairConfig, TrainConfig
+from cemnet_ros.train.config import ScanPairConfig
 from cemnet_ros.train.data import build_datasets
 from cemnet_ros.train.run import TrainReport
 from cemnet_ros.train.scan_pairs import recovery_motion
 from cemnet_ros.train.trainer import Trainer
-
-N_SCANS = 8
-START_NS = 1_700_000_000_000_000_000
-
-
-@pytest.fixture(scope="module")
-def scans_and_poses():
-    lidar, rng = LidarModel(n_beams=16, n_azimuth=360), np.random.default_rng(0)
-    poses = synthetic_trajectory(N_SCANS, step=1.0)
-    return [lidar_scan(courtyard_scene(), pose, lidar, rng) for pose in poses], poses
-
-
-@pytest.fixture(scope="module")
-def training_bag(scans_and_poses, tmp_path_factory) -> Path:
-    path = tmp_path_factory.mktemp("bag") / "courtyard.mcap"
-    with BagWriter(path) as bag:
-        for i, (points, pose) in enumerate(zip(*scans_and_poses)):
-            bag.write_cloud("/points", points, "lidar", START_NS + i * 100_000_000)
-            bag.write_pose("/ground_truth", pose, "world", START_NS + i * 100_000_000)
-    return path
-
-
-def bag_config(bag: Path, out: Path, **overrides) -> TrainConfig:
-    cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=0, exploration_weight=0.0, seed=UNSEEDED)
-    val_cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=0)  # no fused kernels to compile
-    base = TrainConfig(bag=str(bag), out_dir=str(out), batch_size=4, lr=1e-3, epochs=1, cem=cem, val_cem=val_cem,
-                       scans=ScanPairConfig(n_points=128), val_fraction=0.25, threads=1, progress=False, seed=5)
-    return replace(base, **overrides)
 
 
 # ---------------------------------------------------------------------------------------------- pairs
@@ -147,3 +117,19 @@ def test_report_as_markdown_and_json(tmp_path):
     text = report.to_markdown()
     assert "2 of 5 epoch(s), 8 step(s)" in text and "| best (val_mae_r_deg) | 1 | 0.5 | 20 |" in text
     assert json.loads(report.to_json())["rows"][1]["val_mae_r_deg"] == 30.0
+
+
+def test_several_bags_train_together_each_in_its_own_units(training_bag, tmp_path):
+    """Two bags (comma-separated): their pairs one after the other, validation from both, each bag's own scale."""
+    shrunk = tmp_path / "shrunk.mcap"  # the same scans at half the size: another scale
+    with BagReader(training_bag) as reader, BagWriter(shrunk) as bag:
+        for scan in reader.scans():
+            bag.write_cloud("/points", 0.5 * scan.points, "lidar", scan.stamp_ns)
+    train, val = build_datasets(bag_config(f"{training_bag},{shrunk}", tmp_path))
+    assert (len(train), len(val)) == (12, 4)
+    assert train.parts[1].scans.scale == pytest.approx(0.5 * train.parts[0].scans.scale)
+    train.set_epoch(3)
+    first, second = train[0], train[6]  # scan 0 of each bag: same cloud in units, other draws (seed + 1)
+    assert first["source"].shape == second["source"].shape
+    assert not torch.allclose(first["source"], second["source"])
+    assert all(part.epoch == 3 for part in train.parts)

@@ -9,7 +9,7 @@ import numpy as np
 
 from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
-from cemnet_ros.train.config import TrainConfig
+from cemnet_ros.train.config import ScanPairConfig, TrainConfig
 
 TINY = ProtocolConfig(n_points=160, n_partial=96)
 
@@ -38,4 +38,13 @@ def tiny_config(data: Path, out: Path, **overrides) -> TrainConfig:
     val_cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=1)
     base = TrainConfig(data=str(data), out_dir=str(out), batch_size=4, lr=1e-3, epochs=1, cem=cem, val_cem=val_cem,
                        protocol=TINY, val_fraction=0.2, threads=1, progress=False, seed=5)
+    return replace(base, **overrides)
+
+
+def bag_config(bag: Path, out: Path, **overrides) -> TrainConfig:
+    """A training config on ``bag`` small enough for a test: 128 points, CEMs of 24 x 3, batch 4."""
+    cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=0, exploration_weight=0.0, seed=UNSEEDED)
+    val_cem = CEMConfig(n_candidates=24, n_iters=3, n_fused_iters=0)  # no fused kernels to compile
+    base = TrainConfig(bag=str(bag), out_dir=str(out), batch_size=4, lr=1e-3, epochs=1, cem=cem, val_cem=val_cem,
+                       scans=ScanPairConfig(n_points=128), val_fraction=0.25, threads=1, progress=False, seed=5)
     return replace(base, **overrides)
