@@ -256,9 +256,9 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
                         help="uniform scatters besides the default, as fractions of it (default 0.5 0.25)")
     parser.add_argument("--prior-fractions", type=float, nargs="+", default=[0.25, 0.5],
                         help="the uniform scatters beside the prior, as fractions of the default (default 0.25 0.5)")
-    parser.add_argument("--weights", nargs="+", default=["network="], metavar="NAME=PATH",
-                        help="the networks compared, each NAME=PATH (PATH '' = the package's weights; 'official'; "
-                        "a file; default: network=)")
+    parser.add_argument("--weights", nargs="+", default=["scan=scan"], metavar="NAME=PATH",
+                        help="the networks compared, each NAME=PATH (PATH 'scan' = the package's LiDAR scan weights, "
+                        "'' = its ModelNet40 weights, 'official', or a file; default: scan=scan)")
     parser.add_argument("--bag", type=Path, help="pairs from this bag's scans (it needs ground truth) instead of the "
                         "ray-cast large-motion pairs: --pairs per seed, as cemnet_ros.bench.pairs.bag_pairs makes them")
     parser.add_argument("--allow-pickle", action="store_true", help="allow pickled (.pth) weights you trust")

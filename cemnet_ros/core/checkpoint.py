@@ -99,8 +99,8 @@ def load_network(path: str | os.PathLike | None = None, allow_pickle: bool = Fal
     """A :class:`SamplingNetwork` with weights from ``path``: a file, None or "" (the package's default weights),
     ``"official"`` (the official ModelNet40 clean checkpoint, converted) or ``"scan"`` (the package's LiDAR scan
     weights), all shipped in the package."""
-    path = NAMED_WEIGHTS.get("" if path is None else str(path), path)
-    state, _ = load_weights(path, allow_pickle)
+    name = "" if path is None else os.fspath(path)
+    state, _ = load_weights(NAMED_WEIGHTS.get(name, name), allow_pickle)
     network = SamplingNetwork()
     try:
         missing, unexpected = network.load_state_dict(state, strict=False)

@@ -109,9 +109,9 @@ class RecoveryConfig:
                                low=1)
     prior: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_prior "
                        "candidates drawn from the sampling network's raw N(mu0, sigma0)", choices=RECOVERY_PRIORS)
-    weights: str = param("", "that network's weights (recovery.prior 'network'): '' = the package's (ModelNet40), "
-                         "'official' = the official clean checkpoint shipped converted, 'scan' = the package's LiDAR "
-                         "scan weights, or a .npz / official .pth path")
+    weights: str = param("scan", "that network's weights (recovery.prior 'network'): 'scan' = the package's LiDAR "
+                         "scan weights, '' = the package's ModelNet40 weights, 'official' = the official clean "
+                         "checkpoint shipped converted, or a .npz / official .pth path")
     allow_pickle: bool = param(False, "allow loading pickled (.pth) recovery weights: only for files you trust")
 
     def __post_init__(self) -> None:

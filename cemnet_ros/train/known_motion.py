@@ -40,7 +40,7 @@ def known_motion_losses(source: torch.Tensor, target: torch.Tensor, rotation: to
     source, target, prediction = source[keep], target[keep], Prediction(*(x[keep] for x in prediction))
     rotation, translation = rotation[keep].to(source.dtype), translation[keep].to(source.dtype)
     if len(source) == 0:
-        zero = prediction.mu0.sum() * 0.0  # keeps the graph: every rank calls backward
+        zero = prediction.mu0.sum() * 0.0  # no pair to learn from: a zero that backward still accepts
         return {"total": zero, "match": zero, "pose": zero, "sigma": zero}
     truly = transform_points(source, rotation, translation)
     match = matching_loss(truly, target, prediction.match, config.match_radius)

@@ -3,7 +3,14 @@ import pytest
 import torch
 from shared_data import OFFICIAL_DIR, requires_shared
 
-from cemnet_ros.core.checkpoint import DEFAULT_WEIGHTS, CheckpointError, load_network, load_weights, save_weights
+from cemnet_ros.core.checkpoint import (
+    DEFAULT_WEIGHTS,
+    NAMED_WEIGHTS,
+    CheckpointError,
+    load_network,
+    load_weights,
+    save_weights,
+)
 from cemnet_ros.core.network import SamplingNetwork
 
 
@@ -89,3 +96,14 @@ def test_official_alias_loads_the_converted_official_weights():
     assert all(torch.equal(by_alias[k], by_path[k]) for k in by_path)
     default = load_network(None).state_dict()
     assert not all(torch.equal(default[k], by_path[k]) for k in by_path)  # the default is the project's own
+
+
+@pytest.mark.parametrize("name", sorted(NAMED_WEIGHTS))
+def test_every_named_weights_file_ships_small_safe_and_documented(name):
+    """Each name ('' default, 'official', 'scan') is a package file under 5 MB that loads without pickle and says
+    where it came from (its metadata, and a row of cemnet_ros/weights/README.md)."""
+    path = NAMED_WEIGHTS[name]
+    assert path.is_file() and path.stat().st_size < 5 * 1024 * 1024
+    state, meta = load_weights(path, allow_pickle=False)
+    assert meta and isinstance(load_network(name), SamplingNetwork)
+    assert f"`{path.name}`" in (path.parent / "README.md").read_text()

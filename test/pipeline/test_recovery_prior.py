@@ -31,7 +31,7 @@ bench = _load_bench()
 
 
 def test_recovery_prior_is_validated():
-    assert RecoveryConfig().prior == "uniform" and RecoveryConfig().weights == ""
+    assert RecoveryConfig().prior == "uniform" and RecoveryConfig().weights == "scan"  # used once switched on
     with pytest.raises(ValueError, match="recovery prior"):
         RecoveryConfig(prior="magic")
     with pytest.raises(ValueError, match="must be one of"):
@@ -86,11 +86,13 @@ def _summary(recall, ms, paired=None):
 
 
 def test_the_benchmark_applies_issue_12s_criterion():
-    chosen = bench.variants(2000, [0.5, 0.25], [0.25, 0.5], oracle=False)
+    chosen = bench.variants(2000, [0.5, 0.25], [0.25, 0.5], oracle=False, weights={"network": ""}, lean=False)
     assert [v.name for v in chosen] == ["uniform-2000", "uniform-1000", "uniform-500", "network+500",
                                         "network+1000"]
-    assert [v.name for v in bench.variants(2000, [1.0, 0.0625], [0.0625], oracle=True)] == [
-        "uniform-2000", "uniform-125", "network+125", "oracle+125"]  # the default once, first
+    several = bench.variants(2000, [1.0, 0.0625], [0.0625], oracle=True, weights={"a": "", "b": "scan"}, lean=True)
+    assert [v.name for v in several] == [
+        "uniform-2000", "uniform-125", "a+125", "b+125", "oracle+125",  # the default once, first
+        "lean uniform-125", "lean a+125", "lean b+125", "lean oracle+125"]
     summary = {"uniform-2000": _summary(0.9, 1000), "uniform-1000": _summary(0.8, 700),
                "uniform-500": _summary(0.6, 500), "network+500": _summary(0.9, 450),
                "network+1000": _summary(0.85, 700)}
@@ -102,6 +104,9 @@ def test_the_benchmark_applies_issue_12s_criterion():
                "network+500": _summary(0.9, 450, paired=0.6),  # not 0.5x pair by pair
                "network+1000": _summary(0.9, 700)}  # ties are not higher
     assert all("does not pay" in line for line in bench.verdicts(chosen, summary))
+    args = bench.parse_args(["--n-prior", "300", "--weights", "a=", "b=scan"])
+    lean = bench.config_for(several[-2], args)
+    assert (lean.recovery.weights, lean.recovery.search.n_hypotheses) == ("scan", bench.LEAN["n_hypotheses"])
     config = bench.config_for(chosen[3], bench.parse_args(["--n-prior", "300"]))
     assert (config.recovery.prior, config.recovery.search.n_scatter, config.recovery.search.n_prior) == (
         "network", 500, 300)
