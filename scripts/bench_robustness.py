@@ -19,6 +19,7 @@ The benchmark itself is the package's ``cemnet_ros.bench``; this is its command 
 
     python scripts/bench_robustness.py --quick
     python scripts/bench_robustness.py --sets large_motion sequences --pairs 40 --out results/robust.json
+    python scripts/bench_robustness.py --methods cemnet --set recovery.search.n_scatter=125   # other parameters
 """
 from __future__ import annotations
 
@@ -27,6 +28,8 @@ import sys
 from pathlib import Path
 from typing import Optional
 
+import yaml
+
 REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
@@ -34,6 +37,8 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 from cemnet_ros.bench.odometry import METHODS  # noqa: E402
 from cemnet_ros.bench.robustness import FULL, QUICK, SETS, RobustnessConfig, run  # noqa: E402
 from cemnet_ros.io.atomic import write_report  # noqa: E402
+from cemnet_ros.pipeline.config import AlignerConfig  # noqa: E402
+from cemnet_ros.schema import build  # noqa: E402
 from cemnet_ros.tools.cli_errors import reported_errors  # noqa: E402
 
 PROG = "bench_robustness.py"
@@ -54,12 +59,19 @@ def parse_args(argv: Optional[list[str]]) -> tuple[RobustnessConfig, Path]:
     parser.add_argument("--max-gap", type=int, help=f"kitti_gaps: largest g in (i, i+g) (default {FULL['max_gap']})")
     parser.add_argument("--seed", type=int, default=0, help="base seed (large_motion: seed, sequences: seed + 100 + k, "
                                                              "corridor: seed + 200)")
+    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", dest="overrides",
+                        help="node parameters of the pipeline under test, e.g. recovery.search.n_scatter=125 (a "
+                        "value is read as YAML: numbers, lists, strings)")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_robustness.json", help="JSON output")
     args = parser.parse_args(argv)
     sizes = {key: value if getattr(args, key) is None else getattr(args, key)
              for key, value in (QUICK if args.quick else FULL).items()}
+    if not all("=" in item for item in args.overrides):
+        parser.error("--set takes KEY=VALUE items")
     try:
-        config = RobustnessConfig(tuple(args.sets), tuple(args.methods), **sizes, seed=args.seed)
+        overrides = {key: yaml.safe_load(value) for key, value in (item.split("=", 1) for item in args.overrides)}
+        build(AlignerConfig(), overrides)  # an unknown key or a bad value: a usage error now, not in every step
+        config = RobustnessConfig(tuple(args.sets), tuple(args.methods), **sizes, seed=args.seed, overrides=overrides)
     except ValueError as exc:
         parser.error(str(exc))
     return config, args.out

@@ -1,14 +1,15 @@
 """The methods under test, each a fresh odometry per pair / sequence: ``process(points, stamp_ns) -> Output``.
 
-``ScanAligner`` with default parameters; KISS-ICP with its default config (max_range of the sensor, voxel =
-max_range / 100); small_gicp GICP scan-to-scan from the identity. The peers have no failure flag: all their
-steps count as accepted.
+``ScanAligner`` with default parameters (or overrides of them); KISS-ICP with its default config (max_range of
+the sensor, voxel = max_range / 100); small_gicp GICP scan-to-scan from the identity. The peers have no failure
+flag: all their steps count as accepted.
 """
 from __future__ import annotations
 
+import functools
 import importlib
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Any, Callable, Mapping, Optional
 
 import numpy as np
 
@@ -28,12 +29,14 @@ class Output:
 
 
 class CemnetOdometry:
-    """The pipeline under test, through its public interface only."""
+    """The pipeline under test, through its public interface only: the node's defaults, or those with the dotted
+    parameter ``overrides`` (e.g. ``{"recovery.search.n_scatter": 125}``)."""
 
-    def __init__(self, max_range: float) -> None:
+    def __init__(self, max_range: float, overrides: Optional[Mapping[str, Any]] = None) -> None:
         from cemnet_ros.pipeline.aligner import AlignerConfig, ScanAligner
+        from cemnet_ros.schema import build
 
-        self._aligner = ScanAligner(AlignerConfig())
+        self._aligner = ScanAligner(build(AlignerConfig(), overrides or {}))
 
     def process(self, points: np.ndarray, stamp_ns: int) -> Output:
         step = self._aligner.process(points, stamp_ns)
@@ -84,8 +87,9 @@ FACTORIES: dict[str, Callable] = {"cemnet": CemnetOdometry, "kiss-icp": KissOdom
 PEER_MODULES = {"kiss-icp": "kiss_icp.kiss_icp", "gicp": "small_gicp"}
 
 
-def available_methods(wanted: list[str]) -> dict[str, Callable]:
-    """The wanted methods, less the peers that do not import (reported on stderr).
+def available_methods(wanted: list[str], overrides: Optional[Mapping[str, Any]] = None) -> dict[str, Callable]:
+    """The wanted methods, less the peers that do not import (reported on stderr); the pipeline under test with
+    the parameter ``overrides``.
 
     The pipeline under test is always kept: if it cannot even be built, every step counts as failed.
     """
@@ -97,5 +101,5 @@ def available_methods(wanted: list[str]) -> dict[str, Callable]:
             except ImportError as exc:
                 log(f"{name}: not importable ({exc}); left out (pip install -e .[bench])")
                 continue
-        out[name] = FACTORIES[name]
+        out[name] = functools.partial(CemnetOdometry, overrides=overrides) if name == "cemnet" else FACTORIES[name]
     return out

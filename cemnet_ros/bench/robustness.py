@@ -47,6 +47,7 @@ class RobustnessConfig:
     max_gap: int = FULL["max_gap"]  # kitti_gaps: largest g in (i, i + g)
     seed: int = 0
     kitti: Path = SHARED / "data" / "kitti_sample"
+    overrides: dict = field(default_factory=dict)  # dotted parameters of the pipeline under test (default: none)
 
     def __post_init__(self) -> None:
         unknown = sorted(set(self.sets) - set(SETS)) + sorted(set(self.methods) - set(METHODS))
@@ -81,7 +82,9 @@ class RobustnessReport(Report):
 
     def to_markdown(self) -> str:
         head = [f"skip {line}" for line in self.skipped]
-        head.append(f"seeds: {self.config.seeds()}; methods: {', '.join(self.methods)}\n")
+        changed = ", ".join(f"{k}={v}" for k, v in self.config.overrides.items())
+        head.append(f"seeds: {self.config.seeds()}; methods: {', '.join(self.methods)}"
+                    + (f"; cemnet with {changed}" if changed else "") + "\n")
         return "\n".join(head) + "\n" + report_markdown(self.results)
 
     def as_dict(self) -> dict[str, Any]:
@@ -109,7 +112,7 @@ def run(config: RobustnessConfig, after_set: Optional[Callable[[RobustnessReport
         ) -> RobustnessReport:
     """Every set of ``config`` through every importable method; ``after_set(report)`` is called after each set
     with the results so far (e.g. to write them: a long run keeps what it measured)."""
-    methods = available_methods(list(config.methods))
+    methods = available_methods(list(config.methods), config.overrides)
     report = RobustnessReport(config, list(methods), time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     log(f"methods: {', '.join(methods) or 'none'}; seeds: {config.seeds()}")
     warm_up(methods)

@@ -177,3 +177,16 @@ def test_script_turns_its_flags_into_the_config():
     done = subprocess.run([sys.executable, str(script), "--quick", "--pairs", "0"], capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 2 and "error: --pairs must be >= 1" in done.stderr
+
+
+def test_the_pipeline_under_test_takes_parameter_overrides():
+    from cemnet_ros.bench.odometry import available_methods
+
+    default = available_methods(["cemnet"])["cemnet"](100.0)
+    lean = available_methods(["cemnet"], {"recovery.search.n_scatter": 125})["cemnet"](100.0)
+    assert default._aligner.config.recovery.search.n_scatter == 2000
+    assert lean._aligner.config.recovery.search.n_scatter == 125
+    script = Path(__file__).resolve().parents[2] / "scripts" / "bench_robustness.py"
+    bad = subprocess.run([sys.executable, str(script), "--set", "recovery.search.bogus=1"], capture_output=True,
+                         text=True, timeout=120)
+    assert bad.returncode == 2 and "recovery.search.bogus" in bad.stderr
