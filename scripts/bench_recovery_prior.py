@@ -39,7 +39,7 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 
 from cemnet_ros.bench import metrics  # noqa: E402
 from cemnet_ros.bench.odometry import Output  # noqa: E402
-from cemnet_ros.bench.pairs import bag_pairs, large_motion_pairs, pair_record  # noqa: E402
+from cemnet_ros.bench.pairs import bag_pairs, large_motion_pairs, pair_record, read_posed_scans  # noqa: E402
 from cemnet_ros.bench.streams import run_stream  # noqa: E402
 from cemnet_ros.core.config import GlobalSearchConfig  # noqa: E402
 from cemnet_ros.core.geometry import action_to_matrix_np, matrix_to_action_np  # noqa: E402
@@ -236,7 +236,7 @@ def write_results(out: Path, meta: dict, chosen: list[Variant], steps: dict) -> 
     """JSON (everything) and markdown (the table and the verdicts) beside it, both atomically; the markdown."""
     summary = summaries(chosen, steps)
     lines = verdicts(chosen, summary) if all(steps.values()) else []
-    weights = ", ".join(f"{name} = {path or '(package default)'}" for name, path in meta["weights"].items())
+    weights = ", ".join(f"{name} = {path or 'the ModelNet40 weights'}" for name, path in meta["weights"].items())
     markdown = "\n\n".join([f"{len(steps[chosen[0].name])} pairs ({meta['pairs_from']}), seeds {meta['seeds']}; "
                             f"weights: {weights}; {NOISE}",
                             table(chosen, summary, meta["n_prior"]), "\n".join(lines), DEFINITIONS]) + "\n"
@@ -288,7 +288,8 @@ def main(argv: Optional[list[str]] = None) -> int:
     chosen = variants(GlobalSearchConfig().n_scatter, args.uniform_fractions, args.prior_fractions, args.oracle,
                       args.weights, args.lean)
     configs = {v.name: config_for(v, args) for v in chosen}
-    networks = {v.weights: prior_registrar(configs[v.name]) for v in chosen if v.prior == "network"}
+    one_variant = {v.weights: v.name for v in chosen if v.prior == "network"}  # per network: its variants share it
+    networks = {name: prior_registrar(configs[variant]) for name, variant in one_variant.items()}  # loaded once
     meta = {"argv": sys.argv[1:] if argv is None else list(argv), "seeds": args.seeds, "pairs_per_seed": args.pairs,
             "weights": args.weights, "pairs_from": str(args.bag or "ray-cast large-motion pairs"),
             "n_prior": args.n_prior, "prior_scale": args.prior_scale,
@@ -298,8 +299,10 @@ def main(argv: Optional[list[str]] = None) -> int:
     log(f"variants: {', '.join(v.name for v in chosen)}; {args.pairs} pairs per seed {args.seeds} from "
         f"{args.bag or 'ray-casting'}")
 
+    posed = read_posed_scans(args.bag) if args.bag else None
+
     def make_pairs(n: int, seed: int) -> list:
-        return bag_pairs(args.bag, n, seed) if args.bag else large_motion_pairs(n, seed)
+        return bag_pairs(*posed, n, seed) if posed else large_motion_pairs(n, seed)
 
     pairs = [dataclasses.replace(pair, name=f"s{seed}/{pair.name}")
              for seed in args.seeds for pair in make_pairs(args.pairs, seed)]

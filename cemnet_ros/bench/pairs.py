@@ -90,25 +90,31 @@ def large_motion_pairs(n: int, seed: int) -> list[Pair]:
     return pairs
 
 
-def bag_pairs(path: Path, n: int, seed: int, max_translation: float = 10.0) -> list[Pair]:
-    """Large motions between real scans of a bag with ground truth: two scans whose sensors lie at most
-    ``max_translation`` m apart (drawn at random), the second turned about its sensor's z axis by a yaw
-    U[-180, 180] deg (a sensor frame still: only the heading changes)."""
+def read_posed_scans(path: Path) -> tuple[list[np.ndarray], np.ndarray]:
+    """The scans of a bag (sensor frames, float64) and their ground-truth poses T_world_sensor (n, 4, 4), read once
+    for :func:`bag_pairs`; ValueError when a scan has no ground truth."""
     with BagReader(path) as reader:
         scans = [s for s in reader.scans() if not isinstance(s, SkippedMessage)]
         gt_stamps, gt_poses, _ = reader.ground_truth()
     poses = poses_at([s.stamp_ns for s in scans], gt_stamps, gt_poses)
     if poses is None:
         raise ValueError(f"{path}: bag pairs need ground truth at every scan")
+    return [s.points.astype(np.float64) for s in scans], poses
+
+
+def bag_pairs(clouds: list[np.ndarray], poses: np.ndarray, n: int, seed: int, max_translation: float = 10.0
+              ) -> list[Pair]:
+    """Large motions between real scans (``read_posed_scans``): two scans whose sensors lie at most
+    ``max_translation`` m apart (drawn at random), the second turned about its sensor's z axis by a yaw
+    U[-180, 180] deg (a sensor frame still: only the heading changes)."""
     rng, positions = np.random.default_rng(seed), poses[:, :3, 3]
     pairs = []
     for k in range(n):
-        i = int(rng.integers(len(scans)))
+        i = int(rng.integers(len(clouds)))
         near = np.flatnonzero(np.linalg.norm(positions - positions[i], axis=1) <= max_translation)
         j = int(rng.choice(near[near != i])) if len(near) > 1 else i
         spin = np.eye(4)
         spin[:3, :3] = Rotation.from_euler("z", rng.uniform(-180.0, 180.0), degrees=True).as_matrix()
-        second = scans[j].points.astype(np.float64) @ spin[:3, :3].T
         truth = np.linalg.inv(poses[i]) @ poses[j] @ np.linalg.inv(spin)
-        pairs.append(Pair(f"pair{k}:{i}-{j}", scans[i].points.astype(np.float64), second, truth))
+        pairs.append(Pair(f"pair{k}:{i}-{j}", clouds[i], clouds[j] @ spin[:3, :3].T, truth))
     return pairs

@@ -4,12 +4,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cemnet_ros.bench.pairs import bag_pairs
+from cemnet_ros.bench.pairs import bag_pairs, read_posed_scans
 from cemnet_ros.core.geometry import apply_transform, matrix_to_action_np
 
 
 def test_bag_pairs_carry_the_truth_of_a_large_motion(tiny_bag):
-    pairs = bag_pairs(tiny_bag, 12, seed=0, max_translation=10.0)
+    pairs = bag_pairs(*read_posed_scans(tiny_bag), 12, seed=0, max_translation=10.0)
     yaws = []
     for pair in pairs:
         moved = apply_transform(pair.truth, pair.second)  # in the first scan's frame (16 x 360 rays: sparse)
