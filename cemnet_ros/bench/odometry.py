@@ -26,6 +26,7 @@ class Output:
     accepted: bool = True
     reason: str = ""
     covariance: Optional[np.ndarray] = None
+    recovered: bool = False  # the step ran a global search (the peers have none)
 
 
 class CemnetOdometry:
@@ -40,7 +41,8 @@ class CemnetOdometry:
 
     def process(self, points: np.ndarray, stamp_ns: int) -> Output:
         step = self._aligner.process(points, stamp_ns)
-        return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason), np.asarray(step.covariance))
+        return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason), np.asarray(step.covariance),
+                      bool(step.recovered))
 
 
 class KissOdometry:

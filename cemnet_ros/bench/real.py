@@ -1,0 +1,155 @@
+"""Real posed sequences through each method: accuracy, flags, global searches and time per scan.
+
+Sequences: the BALM real-world benchmark (``datas/benchmark_realworld`` of the public hku-mars/BALM repository:
+``fullK.pcd`` scans and ``alidarPose.csv``, a 4x4 pose per scan whose bottom-right entry is its stamp in seconds)
+and the 6 KITTI sample scans of ``../shared``. Nothing is downloaded here: the caller passes the folders.
+
+A step is *off* when its relative motion is wrong by more than ``OFF_M`` or ``OFF_DEG``; off steps are counted
+apart as accepted (the node vouched for them) and flagged.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+
+from cemnet_ros.bench.metrics import ate_first_pose, end_drift_percent, percentile, relative_error
+from cemnet_ros.data.kitti import kitti_scans
+from cemnet_ros.io.console import progress
+from cemnet_ros.io.pointcloud_files import read_points
+
+OFF_M, OFF_DEG = 0.10, 1.0  # a step wrong by more than this is off
+KITTI_PERIOD_S = 0.1
+
+
+@dataclass
+class Sequence:
+    """Scans (sensor frame, metres), their true poses T_world_sensor (4x4 each) and stamps (ns)."""
+
+    name: str
+    scans: list[np.ndarray]
+    poses: list[np.ndarray]
+    stamps_ns: list[int]
+    max_range: float
+
+    @property
+    def period_s(self) -> float:
+        """The median time between scans (the sensor period a live node must keep up with)."""
+        return float(np.median(np.diff(self.stamps_ns))) * 1e-9
+
+    @property
+    def length_m(self) -> float:
+        """Distance travelled along the true trajectory."""
+        positions = np.array([p[:3, 3] for p in self.poses])
+        return float(np.sum(np.linalg.norm(np.diff(positions, axis=0), axis=1)))
+
+
+def balm_sequence(folder: Path, limit: Optional[int] = None) -> Sequence:
+    """The BALM real-world benchmark folder (``full0.pcd`` ... and ``alidarPose.csv``), first ``limit`` scans."""
+    folder = Path(folder)
+    values = np.loadtxt(folder / "alidarPose.csv", delimiter=",", usecols=range(4)).reshape(-1, 4, 4)
+    n = len(values) if limit is None else min(limit, len(values))
+    poses, stamps, scans = [], [], []
+    for k in progress(range(n), desc="reading BALM scans"):
+        pose = values[k].copy()
+        stamps.append(int(round(pose[3, 3] * 1e9)))
+        pose[3] = (0.0, 0.0, 0.0, 1.0)
+        poses.append(pose)
+        scans.append(read_points(folder / f"full{k}.pcd").astype(np.float64))
+    return Sequence("balm_realworld", scans, poses, stamps, max_range=100.0)
+
+
+def kitti_sequence(root: Path) -> Sequence:
+    """The 6 KITTI sample scans at 10 Hz (full resolution)."""
+    scans, poses = zip(*kitti_scans(root))
+    stamps = [int(round(k * KITTI_PERIOD_S * 1e9)) for k in range(len(scans))]
+    return Sequence("kitti_6scans", [s.astype(np.float64) for s in scans], list(poses), stamps, max_range=100.0)
+
+
+@dataclass
+class StepResult:
+    """One scan through one method."""
+
+    pose: Optional[np.ndarray]
+    accepted: bool
+    recovered: bool
+    ms: float
+    reason: str
+
+
+def run_method(factory: Callable, sequence: Sequence) -> list[StepResult]:
+    """A fresh odometry of ``factory`` over the whole sequence (an exception is a failed scan)."""
+    odometry = factory(sequence.max_range)
+    out = []
+    for points, stamp in progress(list(zip(sequence.scans, sequence.stamps_ns)), desc=sequence.name):
+        start = time.perf_counter()
+        try:
+            result = odometry.process(points, stamp)
+        except Exception as exc:  # noqa: BLE001 - the benchmark counts every failure
+            out.append(StepResult(None, False, False, 1e3 * (time.perf_counter() - start), repr(exc)))
+            continue
+        out.append(StepResult(result.pose, result.accepted, result.recovered, 1e3 * (time.perf_counter() - start),
+                              result.reason))
+    return out
+
+
+def sequence_metrics(sequence: Sequence, results: list[StepResult]) -> dict:
+    """ATE, end drift, worst step, off steps (accepted / flagged), global searches and time per scan."""
+    poses = [r.pose if r.pose is not None else np.full((4, 4), np.nan) for r in results]
+    steps = []
+    for k in range(1, len(results)):
+        truth = np.linalg.inv(sequence.poses[k - 1]) @ sequence.poses[k]
+        if results[k].pose is None or results[k - 1].pose is None:
+            steps.append({"index": k, "rte_m": np.inf, "rre_deg": np.inf, "accepted": False,
+                          "recovered": False, "reason": results[k].reason})
+            continue
+        rte, rre = relative_error(np.linalg.inv(poses[k - 1]) @ poses[k], truth)
+        steps.append({"index": k, "rte_m": rte, "rre_deg": rre, "accepted": results[k].accepted,
+                      "recovered": results[k].recovered, "reason": results[k].reason,
+                      "true_m": float(np.linalg.norm(truth[:3, 3])),
+                      "true_deg": float(np.degrees(np.arccos(np.clip((np.trace(truth[:3, :3]) - 1) / 2, -1, 1))))})
+    off = [s for s in steps if not (s["rte_m"] <= OFF_M and s["rre_deg"] <= OFF_DEG)]
+    worst = max(steps, key=lambda s: (s["rte_m"], s["rre_deg"])) if steps else None
+    ms = [r.ms for r in results[1:]]
+    finite = all(r.pose is not None for r in results)
+    return {
+        "scans": len(results),
+        "ate_m": ate_first_pose(poses, sequence.poses) if finite else None,
+        "end_drift_pct": end_drift_percent(poses, sequence.poses, sequence.length_m) if finite else None,
+        "worst_step_m": worst["rte_m"] if worst else None,
+        "worst_step_deg": worst["rre_deg"] if worst else None,
+        "off_accepted": sum(s["accepted"] for s in off),
+        "off_flagged": sum(not s["accepted"] for s in off),
+        "flagged": sum(not s["accepted"] for s in steps),
+        "recovered_share": float(np.mean([s["recovered"] for s in steps])) if steps else None,
+        "ms_p50": percentile(ms, 50),
+        "ms_p95": percentile(ms, 95),
+        "period_ms": 1e3 * sequence.period_s,
+        "off_steps": [{k: (round(v, 4) if isinstance(v, float) else v) for k, v in s.items()} for s in off],
+    }
+
+
+def run_sequences(sequences: list[Sequence], methods: dict[str, Callable]) -> dict:
+    """Every method over every sequence: {sequence: {method: metrics}}."""
+    return {seq.name: {name: sequence_metrics(seq, run_method(factory, seq)) for name, factory in methods.items()}
+            for seq in sequences}
+
+
+def real_table(results: dict) -> str:
+    """A markdown table: one row per sequence and method."""
+    rows = ["| sequence | method | ATE m | end drift % | worst step | off accepted | off flagged | global search "
+            "| ms p50 | ms p95 | period ms |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+
+    def f(value, fmt=".3f"):
+        return "-" if value is None else format(value, fmt)
+
+    for seq, methods in results.items():
+        for name, m in methods.items():
+            rows.append(f"| {seq} | {name} | {f(m['ate_m'])} | {f(m['end_drift_pct'], '.2f')} | "
+                        f"{f(m['worst_step_m'], '.2f')} m / {f(m['worst_step_deg'], '.1f')} deg | {m['off_accepted']} | "
+                        f"{m['off_flagged']} | {f(100 * m['recovered_share'] if m['recovered_share'] is not None else None, '.0f')} % | "
+                        f"{f(m['ms_p50'], '.0f')} | {f(m['ms_p95'], '.0f')} | {f(m['period_ms'], '.0f')} |")
+    return "\n".join(rows)
