@@ -148,8 +148,9 @@ def real_table(results: dict) -> str:
 
     for seq, methods in results.items():
         for name, m in methods.items():
+            share = None if m["recovered_share"] is None else 100 * m["recovered_share"]
             rows.append(f"| {seq} | {name} | {f(m['ate_m'])} | {f(m['end_drift_pct'], '.2f')} | "
-                        f"{f(m['worst_step_m'], '.2f')} m / {f(m['worst_step_deg'], '.1f')} deg | {m['off_accepted']} | "
-                        f"{m['off_flagged']} | {f(100 * m['recovered_share'] if m['recovered_share'] is not None else None, '.0f')} % | "
+                        f"{f(m['worst_step_m'], '.2f')} m / {f(m['worst_step_deg'], '.1f')} deg | "
+                        f"{m['off_accepted']} | {m['off_flagged']} | {f(share, '.0f')} % | "
                         f"{f(m['ms_p50'], '.0f')} | {f(m['ms_p95'], '.0f')} | {f(m['period_ms'], '.0f')} |")
     return "\n".join(rows)
