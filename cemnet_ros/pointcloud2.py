@@ -51,13 +51,14 @@ class CloudReport:
 
 @dataclass
 class EncodedCloud:
-    """The PointCloud2 payload for float32 x, y, z (little endian, unorganised, dense)."""
+    """The PointCloud2 payload for float32 x, y, z (little endian, unorganised)."""
 
     fields: List[Tuple[str, int, int, int]]  # (name, offset, datatype, count)
     point_step: int
     row_step: int
     width: int
     data: bytes
+    dense: bool  # every point finite (the message's is_dense: a reader may then skip the NaN test)
 
 
 def as_bytes(data: Any) -> np.ndarray:
@@ -71,7 +72,8 @@ def decode_xyz(msg: Any) -> Tuple[np.ndarray, CloudReport]:
     """Return the finite x, y, z of a PointCloud2 as an (n, 3) float64 array, plus a :class:`CloudReport`.
 
     Handles any field offsets, point_step/row_step padding, float32/float64, either endianness and organised
-    clouds (height > 1) with NaN holes. Raises :class:`CloudError` when the cloud is empty, lacks x/y/z, has
+    clouds (height > 1) with NaN or inf holes; ``is_dense`` is not trusted (drivers set it wrongly), every point
+    is tested. Raises :class:`CloudError` when the cloud is empty, lacks x/y/z, has
     non-float x/y/z, a point_step or row_step too small for its fields, data shorter than row_step * height, or
     no finite point at all.
     """
@@ -196,9 +198,10 @@ def encode_xyz(points: np.ndarray) -> EncodedCloud:
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
-    data = pts.astype("<f4").tobytes()
+    packed = pts.astype("<f4")
     return EncodedCloud(fields=[("x", 0, FLOAT32, 1), ("y", 4, FLOAT32, 1), ("z", 8, FLOAT32, 1)],
-                        point_step=12, row_step=12 * len(pts), width=len(pts), data=data)
+                        point_step=12, row_step=12 * len(pts), width=len(pts), data=packed.tobytes(),
+                        dense=bool(np.isfinite(packed).all()))
 
 
 def make_pointcloud2(msg_cls: Any, field_cls: Any, points: np.ndarray, frame_id: str, stamp: Any,
@@ -211,7 +214,7 @@ def make_pointcloud2(msg_cls: Any, field_cls: Any, points: np.ndarray, frame_id:
     enc = encode_xyz(points)
     fields = [field_cls(name=n, offset=o, datatype=d, count=c) for n, o, d, c in enc.fields]
     body = dict(height=1, width=enc.width, fields=fields, is_bigendian=False, point_step=enc.point_step,
-                row_step=enc.row_step, is_dense=True)
+                row_step=enc.row_step, is_dense=enc.dense)
     return _message(msg_cls, body, np.frombuffer(enc.data, dtype=np.uint8), frame_id, stamp, header_cls)
 
 

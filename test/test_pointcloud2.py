@@ -12,6 +12,7 @@ from cemnet_ros.pointcloud2 import (
     INT16,
     UINT8,
     CloudError,
+    decode_scan,
     decode_xyz,
     encode_xyz,
     make_pointcloud2,
@@ -78,6 +79,43 @@ def test_organised_cloud_with_nans():
     keep = np.isfinite(pts).all(1)
     np.testing.assert_allclose(out, PTS[keep], rtol=1e-6)
     assert report.n_total == 12 and report.n_valid == 9 and report.n_nonfinite == 3
+
+
+@pytest.mark.parametrize("is_dense", [True, False])
+def test_holes_round_trip_dropped_with_their_times_whatever_is_dense_says(is_dense):
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    pts = PTS.astype(np.float32).astype(np.float64)
+    pts[[0, 4]] = np.nan  # no-returns of a 3 x 4 organised cloud, as NaN ...
+    pts[[6, 11]] = np.inf  # ... as inf ...
+    pts[9, 1] = -np.inf  # ... and in one coordinate only
+    rows = np.zeros(12, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", "<u4")])
+    rows["x"], rows["y"], rows["z"] = pts.T
+    rows["t"] = np.arange(12) * 1000  # ns after the stamp (Ouster)
+    msg = PointCloud2(height=3, width=4, is_bigendian=False, point_step=16, row_step=64, is_dense=is_dense,
+                      data=rows.tobytes(), fields=[PointField(name=n, offset=o, datatype=d, count=1) for n, o, d in
+                                                   (("x", 0, FLOAT32), ("y", 4, FLOAT32), ("z", 8, FLOAT32),
+                                                    ("t", 12, PointField.UINT32))])
+    msg.header.stamp = Time(sec=5, nanosec=0)
+    decoded = decode_scan(deserialize_message(serialize_message(msg), PointCloud2))
+    keep = np.isfinite(pts).all(axis=1)
+    np.testing.assert_array_equal(decoded.points, pts[keep])
+    np.testing.assert_allclose(decoded.times, np.flatnonzero(keep) * 1e-6)
+    assert (decoded.report.n_total, decoded.report.n_valid, decoded.report.n_nonfinite) == (12, 7, 5)
+
+
+def test_make_pointcloud2_says_dense_only_when_every_point_is_finite():
+    from builtin_interfaces.msg import Time
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    holed = PTS.copy()
+    holed[3, 2] = np.nan
+    dense = make_pointcloud2(PointCloud2, PointField, PTS, "lidar", Time())
+    sparse = make_pointcloud2(PointCloud2, PointField, holed, "lidar", Time())
+    assert dense.is_dense and not sparse.is_dense
+    np.testing.assert_allclose(decode_xyz(sparse)[0], np.delete(PTS, 3, axis=0), rtol=1e-6)
 
 
 def test_data_types_of_rclpy_and_rosbags():

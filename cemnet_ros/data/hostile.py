@@ -96,12 +96,6 @@ def _sector(points: np.ndarray, degrees: float) -> np.ndarray:
     return points[azimuth < degrees]
 
 
-def _half_nan(points: np.ndarray) -> np.ndarray:
-    out = points.copy()
-    out[::2] = np.nan
-    return out
-
-
 def _huge(points: np.ndarray) -> np.ndarray:
     """Over 2 million points: the scan repeated with centimetre noise."""
     copies = int(np.ceil(2_100_000 / len(points)))
@@ -152,7 +146,6 @@ def geometry_cases() -> list[Case]:
         Case("millimetre_cube", "geometry", "rejected_or_flagged",
              _points(lambda p: _rng(p).uniform(0, 1e-3, p.shape))),
         Case("huge_coordinates", "geometry", "rejected_or_flagged", _points(lambda p: p * 1e30)),
-        Case("half_nan", "geometry", "rejected", _points(_half_nan)),
         Case("ninety_percent_nan", "geometry", "rejected",
              _points(lambda p: np.where(_rng(p).random((len(p), 1)) < 0.9, np.nan, p))),
         Case("noise_ball", "geometry", "rejected_or_flagged", _points(lambda p: _rng(p).normal(0, 20, p.shape))),

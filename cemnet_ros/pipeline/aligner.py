@@ -113,17 +113,17 @@ class ScanAligner:
 
     # -- sequential mode ------------------------------------------------------------------------------------
     def process(self, points: np.ndarray, stamp_ns: int, point_times: Optional[np.ndarray] = None,
-                frame_id: str = "", now_ns: Optional[int] = None, n_total: Optional[int] = None) -> AlignmentStep:
+                frame_id: str = "", now_ns: Optional[int] = None) -> AlignmentStep:
         """Register this scan against the local map and accumulate the pose.
 
-        The scan first passes the input checks (:mod:`.input_checks`; ``now_ns``: the caller's clock for the
-        future-stamp check; ``n_total``: the message's points when ``points`` are its finite ones); a rejected
-        one raises ScanRejected and changes nothing. ``point_times``: each point's time (s, relative to
+        The scan first passes the input checks (:mod:`.input_checks`: its non-finite points are dropped;
+        ``now_ns``: the caller's clock for the future-stamp check); a rejected one raises ScanRejected and
+        changes nothing. ``point_times``: each point's time (s, relative to
         ``stamp_ns``, aligned with ``points``); with ``config.preprocess.deskew`` the scan is first deskewed
         (:mod:`.sweep`). The pose is the one at ``stamp_ns`` in any case.
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
-        admitted = self._checks.admit(points, point_times, stamp_ns, frame_id, now_ns, n_total)
+        admitted = self._checks.admit(points, point_times, stamp_ns, frame_id, now_ns)
         if admitted.restart:
             self.reset(self._pose)
         points, offset_ns, self._map = self._sweep.deskewed(admitted.points, admitted.times, stamp_ns,
@@ -245,8 +245,8 @@ class ScanAligner:
 
     # -- pair mode ------------------------------------------------------------------------------------------
     def align_pair(self, source: np.ndarray, target: np.ndarray, stamp_ns: int, *, source_frame: str = "",
-                   target_frame: str = "", target_stamp_ns: Optional[int] = None, now_ns: Optional[int] = None,
-                   n_total: Optional[int] = None) -> AlignmentStep:
+                   target_frame: str = "", target_stamp_ns: Optional[int] = None, now_ns: Optional[int] = None
+                   ) -> AlignmentStep:
         """Pair mode (:class:`~.pair_mode.PairMode`): the pose of ``source`` in the frame of ``target``."""
         return self._pairs.align(source, target, stamp_ns, source_frame=source_frame, target_frame=target_frame,
-                                 target_stamp_ns=target_stamp_ns, now_ns=now_ns, n_total=n_total)
+                                 target_stamp_ns=target_stamp_ns, now_ns=now_ns)

@@ -106,18 +106,16 @@ class AlignerSession:
             self._aligner.request_recovery()
 
     def process(self, scan: Any, frame_id: str, now_ns: Optional[int]) -> StepResult:
-        """Sequential mode: register a decoded scan (points, stamp_ns, times, n_total) against the map."""
+        """Sequential mode: register a decoded scan (points, stamp_ns, times) against the map."""
         with self._map_lock:
-            step = self._aligner.process(scan.points, scan.stamp_ns, scan.times, frame_id=frame_id, now_ns=now_ns,
-                                         n_total=scan.n_total)
+            step = self._aligner.process(scan.points, scan.stamp_ns, scan.times, frame_id=frame_id, now_ns=now_ns)
         return self._result(step)
 
     def align_pair(self, source: Any, target: Any, source_frame: str, target_frame: str,
                    now_ns: Optional[int]) -> StepResult:
         """Pair mode: the pose of a decoded source scan in the frame of a decoded target."""
         step = self._aligner.align_pair(source.points, target.points, source.stamp_ns, source_frame=source_frame,
-                                        target_frame=target_frame, target_stamp_ns=target.stamp_ns, now_ns=now_ns,
-                                        n_total=source.n_total)
+                                        target_frame=target_frame, target_stamp_ns=target.stamp_ns, now_ns=now_ns)
         return self._result(step)
 
     def _result(self, step: Any) -> StepResult:

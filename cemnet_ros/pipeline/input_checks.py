@@ -1,18 +1,20 @@
 """Plausibility checks a scan passes before it may move the trajectory (no ROS: the node and the replay share it).
 
 A registration can be judged only against a reference, and a reference is only as good as the scans that made
-it: a scan with a fraction of the usual points (a sector, NaN-filled, another sensor's), a corrupt stamp or a
-foreign frame would be aligned somewhere and, worse, could become the reference. So each scan is checked first:
+it: a scan with a fraction of the usual points (a sector, another sensor's), a corrupt stamp or a foreign frame
+would be aligned somewhere and, worse, could become the reference. So each scan is checked first:
 
 - **stamp**: nanoseconds within a second; not beyond ``future_tolerance`` ahead of the caller's clock; a stamp
   before the last one (out of order, a bag loop) or more than ``stamp_jump`` (and 20 periods) after it is
   refused unless the next scan confirms the new time base;
 - **frame**: the trajectory's frame_id is the first scan's; another one is refused until a reset;
+- **non-finite points** (NaN or inf in any coordinate: the no-returns of an organised cloud) are dropped first;
+  however many there are, they never refuse a scan: the checks below judge the finite points alone (a sensor
+  that turns to open sky has many more no-returns, and its returns are as trustworthy as before);
 - **point count**: finite points against the running median of the recent scans (``min_count_ratio``), the
-  azimuth sectors they cover against the recent coverage (``min_coverage_ratio``: a cropped sector), the share
-  of non-finite points against its recent level (``max_nonfinite_rise``); when a level stays unmet for
-  ``relevel_after`` scans the sensor has changed and the levels restart, with a warning; a trajectory that
-  began on a scan far smaller than the next ones restarts from the first representative one;
+  azimuth sectors they cover against the recent coverage (``min_coverage_ratio``: a cropped sector); when a
+  level stays unmet for ``relevel_after`` scans the sensor has changed and the levels restart, with a warning;
+  a trajectory that began on a scan far smaller than the next ones restarts from the first representative one;
 - **size**: more than ``max_points`` finite points are decimated (seeded), with a warning, never silently slow.
 
 Rejections raise :class:`ScanRejected` with a ``kind`` the node counts; warnings travel with the admitted scan.
@@ -47,11 +49,9 @@ class InputChecksConfig:
     max_points: int = param(400_000, "more finite points than this are decimated to it, with a warning; 0 = no cap",
                             low=0)
     min_count_ratio: float = param(0.35, "a scan with fewer finite points than this fraction of the recent median "
-                                   "is rejected; 0 = off (with the two checks below)", low=0.0, high=1.0)
+                                   "is rejected; 0 = off (with the check below)", low=0.0, high=1.0)
     min_coverage_ratio: float = param(0.5, "... or covering fewer azimuth sectors (of 36) than this fraction of "
                                       "the recent median", low=0.0, high=1.0)
-    max_nonfinite_rise: float = param(0.25, "... or whose share of non-finite points exceeds the recent median "
-                                      "share by more than this", low=0.0, high=1.0)
     level_window: int = param(20, "scans in the running point-count median", low=1, high=1000)
     relevel_after: int = param(10, "after this many consecutive low-count scans the median restarts from them",
                                low=1)
@@ -63,8 +63,8 @@ class InputChecksConfig:
 
 @dataclass
 class Admitted:
-    """A scan that passed: its points (decimated if capped), what to tell the user, and whether the
-    trajectory must restart from it (it began on an implausible scan)."""
+    """A scan that passed: its finite points (decimated if capped) and their times, what to tell the user, and
+    whether the trajectory must restart from it (it began on an implausible scan)."""
 
     points: np.ndarray
     times: Optional[np.ndarray]
@@ -72,7 +72,6 @@ class Admitted:
     frame_id: str
     n_finite: int
     coverage: float  # fraction of the azimuth sectors with points
-    nonfinite: float  # share of the message's points that were not finite
     warnings: list[tuple[str, str]] = field(default_factory=list)  # (kind, message)
     restart: bool = False
 
@@ -89,7 +88,7 @@ class InputChecks:
 
     def __init__(self, config: InputChecksConfig) -> None:
         self.config = config
-        self._levels: collections.deque = collections.deque(maxlen=config.level_window)  # (count, coverage, nonfinite)
+        self._levels: collections.deque = collections.deque(maxlen=config.level_window)  # (count, coverage)
         self._low_in_a_row = 0
         self._frame_id: Optional[str] = None
         self._last_stamp: Optional[int] = None
@@ -102,21 +101,18 @@ class InputChecks:
         self._periods.clear()
 
     def admit(self, points: np.ndarray, times: Optional[np.ndarray], stamp_ns: int, frame_id: str = "",
-              now_ns: Optional[int] = None, n_total: Optional[int] = None) -> Admitted:
+              now_ns: Optional[int] = None) -> Admitted:
         """Check one scan (raises ScanRejected); call :meth:`passed` once the pipeline has used it.
 
-        ``n_total``: the points in the message when ``points`` holds only its finite ones (as decoded)."""
+        The admitted scan holds the finite points only (and their times): what the checks judged."""
         self._check_stamp(stamp_ns, now_ns)
         if frame_id and self._frame_id is not None and frame_id != self._frame_id:
             raise ScanRejected(f"frame_id {frame_id!r} is not the trajectory's {self._frame_id!r}: refused (a reset "
                                "starts over in the new frame)", "frame_id")
-        finite_points, finite = _finite(points)
-        n_finite = len(finite_points)
-        n_total = max(len(points) if n_total is None else int(n_total), 1)
-        admitted = Admitted(points, times, stamp_ns, frame_id, n_finite, _coverage(finite_points),
-                            1.0 - n_finite / n_total)
+        points, times = _finite(points, times)
+        admitted = Admitted(points, times, stamp_ns, frame_id, len(points), _coverage(points))
         self._check_levels(admitted)
-        self._cap(admitted, finite)
+        self._cap(admitted)
         return admitted
 
     def passed(self, admitted: Admitted) -> None:
@@ -124,7 +120,7 @@ class InputChecks:
         stamp_ns = admitted.stamp_ns
         if admitted.restart:
             self._levels.clear()
-        self._levels.append((admitted.n_finite, admitted.coverage, admitted.nonfinite))
+        self._levels.append((admitted.n_finite, admitted.coverage))
         self._low_in_a_row = 0
         if self._last_stamp is not None and stamp_ns > self._last_stamp:
             self._periods.append(stamp_ns - self._last_stamp)
@@ -155,13 +151,13 @@ class InputChecks:
         cfg, n = self.config, admitted.n_finite
         if not self._levels or cfg.min_count_ratio <= 0:
             return
-        count, coverage, nonfinite = np.median(np.asarray(self._levels), axis=0)
+        count, coverage = np.median(np.asarray(self._levels), axis=0)
         if len(self._levels) < EARLY_LEVEL and n > UPWARD_RATIO * count:
             admitted.restart = True
             admitted.warnings.append(("implausible_start", f"the trajectory began on scans of ~{count:.0f} points, "
                                       f"this one has {n}: restarted from it (pose kept)"))
             return
-        fault = _level_fault(admitted, cfg, count, coverage, nonfinite)
+        fault = _level_fault(admitted, cfg, count, coverage)
         if fault is None:
             return
         self._low_in_a_row += 1
@@ -171,25 +167,27 @@ class InputChecks:
         admitted.warnings.append(("relevel", f"{self._low_in_a_row} scans in a row: {fault[1]}: the sensor "
                                   "changed, the levels restart from this scan"))
 
-    def _cap(self, admitted: Admitted, finite: Optional[np.ndarray]) -> None:
+    def _cap(self, admitted: Admitted) -> None:
+        """More than ``max_points`` finite points: a seeded subset of them, in scan order, with a warning."""
         cap = self.config.max_points
         if cap <= 0 or admitted.n_finite <= cap:
             return
-        keep = np.arange(len(admitted.points)) if finite is None else np.flatnonzero(finite)
-        keep = np.sort(np.random.default_rng(0).choice(keep, cap, replace=False))
+        keep = np.sort(np.random.default_rng(0).choice(admitted.n_finite, cap, replace=False))
         admitted.warnings.append(("decimated", f"{admitted.n_finite} finite points decimated to {cap} "
                                   "(input.max_points)"))
         admitted.points = admitted.points[keep]
         admitted.times = None if admitted.times is None else admitted.times[keep]
 
 
-def _finite(points: np.ndarray) -> tuple[np.ndarray, Optional[np.ndarray]]:
-    """(the finite rows, their mask or None when all are: the decoded scans are, and a 124k-point mask and copy
-    per scan would cost milliseconds for nothing)."""
+def _finite(points: np.ndarray, times: Optional[np.ndarray]) -> tuple[np.ndarray, Optional[np.ndarray]]:
+    """The rows whose three coordinates are finite, and their times: a no-return (NaN or inf) is no point.
+
+    Unchanged when all are (the decoded scans are: a 124k-point mask and copy per scan would cost milliseconds
+    for nothing)."""
     if np.isfinite(points).all():
-        return points, None
+        return points, times
     finite = np.all(np.isfinite(points), axis=1)
-    return points[finite], finite
+    return points[finite], None if times is None else times[finite]
 
 
 def _coverage(points: np.ndarray) -> float:
@@ -202,8 +200,8 @@ def _coverage(points: np.ndarray) -> float:
     return float(np.mean(counts >= max(3.0, 0.02 * len(points) / SECTORS)))
 
 
-def _level_fault(admitted: Admitted, cfg: InputChecksConfig, count: float, coverage: float,
-                 nonfinite: float) -> Optional[tuple[str, str]]:
+def _level_fault(admitted: Admitted, cfg: InputChecksConfig, count: float, coverage: float
+                 ) -> Optional[tuple[str, str]]:
     """(kind, message) of the first level the scan falls short of, None when it meets them all."""
     n = admitted.n_finite
     if n < cfg.min_count_ratio * count:
@@ -211,7 +209,4 @@ def _level_fault(admitted: Admitted, cfg: InputChecksConfig, count: float, cover
     if admitted.coverage < cfg.min_coverage_ratio * coverage:
         return "coverage", (f"points in {admitted.coverage:.0%} of the azimuth sectors where {coverage:.0%} is "
                             "usual (a cropped sector?)")
-    if admitted.nonfinite > nonfinite + cfg.max_nonfinite_rise:
-        return "non_finite", (f"{admitted.nonfinite:.0%} of the points are not finite where {nonfinite:.0%} is "
-                              "usual")
     return None

@@ -46,15 +46,15 @@ class PairMode:
         self.target_checks.forget_frame()
 
     def align(self, source: np.ndarray, target: np.ndarray, stamp_ns: int, *, source_frame: str = "",
-              target_frame: str = "", target_stamp_ns: Optional[int] = None, now_ns: Optional[int] = None,
-              n_total: Optional[int] = None) -> AlignmentStep:
+              target_frame: str = "", target_stamp_ns: Optional[int] = None, now_ns: Optional[int] = None
+              ) -> AlignmentStep:
         """The pose of ``source`` in the frame of ``target``.
 
         Both clouds pass the input checks first, each against the levels of its own stream (a target's kinds
         are prefixed ``target_``; its stamp is checked against the clock only); ScanRejected changes nothing.
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
-        admitted = self.source_checks.admit(source, None, stamp_ns, source_frame, now_ns, n_total)
+        admitted = self.source_checks.admit(source, None, stamp_ns, source_frame, now_ns)
         target_map, target_warnings = self._target_map(
             target, target_frame, stamp_ns if target_stamp_ns is None else target_stamp_ns, now_ns)
         frame = self.preprocessor.frame(admitted.points)

@@ -112,8 +112,7 @@ class _Replayer:
     def process(self, frame: CloudFrame) -> None:
         """Align one scan (as align_node._process: dt since the previous processed scan) and publish it."""
         try:  # as align_node, without a clock: no future-stamp check offline
-            step = self.aligner.process(frame.points, frame.stamp_ns, frame.times, frame_id=frame.frame_id,
-                                        n_total=frame.report.n_total)
+            step = self.aligner.process(frame.points, frame.stamp_ns, frame.times, frame_id=frame.frame_id)
         except ValueError as err:  # ScanRejected (too few points, ...) or a cloud the core refuses
             kind = err.kind if isinstance(err, ScanRejected) else "registration"
             self.skip(SkippedMessage(frame.index, self.topic, frame.stamp_ns, frame.t_s, kind, str(err)))

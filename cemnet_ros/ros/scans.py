@@ -59,7 +59,6 @@ class Scan:
     points: np.ndarray
     times: Optional[np.ndarray]  # per-point seconds relative to the stamp, None without a time field
     stamp_ns: int
-    n_total: int  # points in the message, finite or not
     warnings: list  # (kind, message): e.g. a time field that could not be used
 
 
@@ -78,4 +77,4 @@ def decode(item: Incoming, want_times: bool, deserialize: Callable[[bytes], Any]
         raise ScanRejected(f"{item.topic_kind} cloud rejected: {exc}", exc.kind) from None
     warnings = [("time_field", f"{item.topic_kind} cloud not deskewed: {decoded.time_error}")] \
         if decoded.time_error else []
-    return Scan(msg, decoded.points, decoded.times, item.stamp_ns, decoded.report.n_total, warnings)
+    return Scan(msg, decoded.points, decoded.times, item.stamp_ns, warnings)

@@ -32,8 +32,8 @@ class FakeAligner:
     def request_recovery(self):
         self.calls.append(("recovery",))
 
-    def process(self, points, stamp_ns, times, *, frame_id, now_ns, n_total):
-        self.calls.append(("process", stamp_ns, frame_id, now_ns, n_total))
+    def process(self, points, stamp_ns, times, *, frame_id, now_ns):
+        self.calls.append(("process", stamp_ns, frame_id, now_ns))
         relative = np.linalg.inv(self.pose) @ (self.pose @ MOTION)
         self.pose = self.pose @ MOTION
         return SimpleNamespace(stamp_ns=stamp_ns, pose=self.pose.copy(), relative=relative, accepted=True,
@@ -45,7 +45,7 @@ def _session(make=FakeAligner):
 
 
 def _scan(stamp_ns):
-    return SimpleNamespace(points=np.zeros((10, 3)), stamp_ns=stamp_ns, times=None, n_total=12)
+    return SimpleNamespace(points=np.zeros((10, 3)), stamp_ns=stamp_ns, times=None)
 
 
 def test_a_failed_load_is_fatal_and_releases_the_waiting_worker():
@@ -75,7 +75,7 @@ def test_steps_publish_the_base_motion_with_the_twist_over_the_stamp_gap():
     first = session.process(_scan(1_000_000_000), "lidar", 5)
     session.begin_scan()
     second = session.process(_scan(1_100_000_000), "lidar", 6)
-    assert session.scale == 0.25 and session._aligner.calls[0] == ("process", 1_000_000_000, "lidar", 5, 12)
+    assert session.scale == 0.25 and session._aligner.calls[0] == ("process", 1_000_000_000, "lidar", 5)
     assert first.out.twist_known is False and second.out.twist_known
     base_motion = T_BASE_SENSOR @ MOTION @ np.linalg.inv(T_BASE_SENSOR)
     np.testing.assert_allclose(second.out.linear, base_motion[:3, 3] / 0.1, atol=1e-9)
