@@ -9,8 +9,9 @@ KERNEL_FOLDERS = {"core", "pipeline", "ros", "replay", "tools", "bench", "train"
 
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels(request):
-    """The numba kernels compiled once per session (~25 s), before the first test instead of inside whichever
-    test runs them first: each test's time and timeouts stay its own. Skipped when no selected test needs them."""
+    """The numba kernels made ready once per session (compiled and cached, ~1 min on 2 cores, when no cache has
+    them yet; loaded in seconds after that), before the first test instead of inside whichever test runs them
+    first: each test's time and timeouts stay its own. Skipped when no selected test needs them."""
     if any(Path(item.path).parent.name in KERNEL_FOLDERS for item in request.session.items):
         from cemnet_ros.core import lattice_rewards
         from cemnet_ros.pipeline import preprocess, refine

@@ -17,15 +17,7 @@ import torch
 
 from ..io.atomic import atomic_file
 from .network import SamplingNetwork
-
-PACKAGE_WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-# The weights `register` uses when none are given: this project's, trained by cemnet-train on the ModelNet40
-# subset (see cemnet_ros/weights/README.md). The official clean checkpoint, converted, ships beside them.
-DEFAULT_WEIGHTS = PACKAGE_WEIGHTS_DIR / "cemnet_ros_modelnet40_clean.npz"
-OFFICIAL_WEIGHTS = PACKAGE_WEIGHTS_DIR / "official_modelnet40_clean.npz"
-# Trained on LiDAR scans for the node's recovery (ray-cast courtyard scans of 16-128 beams and the 6 KITTI scans).
-SCAN_WEIGHTS = PACKAGE_WEIGHTS_DIR / "cemnet_ros_lidar_scans.npz"
-NAMED_WEIGHTS = {"": DEFAULT_WEIGHTS, "official": OFFICIAL_WEIGHTS, "scan": SCAN_WEIGHTS}
+from .weight_files import DEFAULT_WEIGHTS, NAMED_WEIGHTS, OFFICIAL_WEIGHTS, SCAN_WEIGHTS  # noqa: F401 (importers')
 
 _OFFICIAL_PREFIXES = (("coarse_policy.emb_nn.", "embedding."), ("coarse_policy.nn.", "sigma_head."))
 _OFFICIAL_IGNORED = ("coarse_policy.reflect",)

@@ -7,17 +7,18 @@
   :data:`FASTMATH_INF_SAFE` drops the no-inf/no-nan assumptions. A kernel that sets no fastmath is compiled
   with that of the first kernel that calls it (numba's flag inheritance, one version per signature: the normals'
   eigen solver gets ``_voxel_normals``' fast-math), so :func:`kernel` passes on only the options it is given.
-- **dynamic chunks**: every ``prange`` loop hands out its iterations in chunks (``numba.parallel_chunksize``,
-  sized per loop) instead of numba's default of one static block per thread. On a shared machine (the ROS
-  executor, the DDS threads, the driver) a pre-empted thread would otherwise hold up the whole kernel while
-  the others idle: this is what let a node fed 10x its rate fall well below its own capacity.
+- **static loop splits**: under the OpenMP and workqueue threading layers numba gives each thread one
+  contiguous block of a ``prange`` loop's iterations whatever ``numba.parallel_chunksize`` asks (chunks are
+  balanced only under TBB), so no kernel sets a chunk size; the context manager would also make the kernel
+  uncachable (numba 0.68: ``cache=True`` fails on it with an AttributeError).
 - **threading layer**: OpenMP first, which is thread-safe when several threads launch parallel kernels at once
   (a node's worker and a caller), and skips the too-old TBB that some machines carry (numba warns about it on
   every start otherwise). Set here, before any parallel kernel first runs. Threads: numba's default (all cores)
   unless the trainer's ``threads`` sets fewer; a node process makes idle OpenMP threads sleep (``cemnet_ros.ros``).
-- **no on-disk cache** (:data:`CACHE`, never ``cache=True`` on a kernel): kernels are compiled once per process
-  (each module's ``compile_kernels``; ~10 s for the lattice rewards), never loaded from numba's cache, whose
-  byte-identical machine code ran 15-30% slower here than freshly compiled code (docs/evaluation.md).
+- **on-disk cache** (:data:`CACHE`): every kernel is cached by numba (``cache=True``) in a folder per version of
+  the kernels' source (:mod:`.kernel_cache`, which says where and why), so only a process that finds no cache
+  compiles them (~1 min on 2 cores for the aligner's kernels; each module's ``compile_kernels`` does it at start).
+  Loaded kernels run as fast as compiled ones (docs/evaluation.md, ``scripts/bench_jit_cache.py``).
 """
 from __future__ import annotations
 
@@ -25,8 +26,10 @@ from typing import Any, Callable, Optional, Union
 
 import numba
 
+from .kernel_cache import cache_folder
+
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]  # type: ignore[attr-defined]
-CACHE = False  # see the module docstring
+CACHE = True  # see the module docstring
 # fastmath without the no-inf/no-nan assumptions: distances start at the search bound, never at inf
 FASTMATH_INF_SAFE = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
@@ -39,5 +42,16 @@ def kernel(function: Optional[Callable] = None, *, fastmath: Union[bool, set, No
     """
     chosen: dict[str, Any] = {"fastmath": fastmath, "parallel": parallel, "inline": inline}
     options = {name: value for name, value in chosen.items() if value is not None}
-    compile_ = numba.njit(nogil=True, cache=CACHE, **options)
+
+    def compile_(py_function: Callable) -> Any:
+        folder = cache_folder() if CACHE else None
+        if folder is None:
+            return numba.njit(nogil=True, **options)(py_function)
+        previous = numba.config.CACHE_DIR  # type: ignore[attr-defined]
+        numba.config.CACHE_DIR = folder  # type: ignore[attr-defined]  # numba's locator reads it right here
+        try:
+            return numba.njit(nogil=True, cache=True, **options)(py_function)
+        finally:
+            numba.config.CACHE_DIR = previous  # type: ignore[attr-defined]
+
     return compile_ if function is None else compile_(function)

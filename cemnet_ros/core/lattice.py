@@ -80,30 +80,29 @@ def _splat(points, origin, dims, spacing, radius, node_nearest):
         for k in range(3):
             lo[i, k] = max(int(np.ceil((points[i, k] - radius - origin[k]) / spacing)), 0)
             hi[i, k] = min(int(np.floor((points[i, k] + radius - origin[k]) / spacing)), dims[k] - 1)
-    with numba.parallel_chunksize(1):  # dynamic chunks (core/jit.py): slabs differ in cost
-        for a in numba.prange(dims[0]):
-            x = origin[0] + a * spacing
-            for i in range(n):
-                if a < lo[i, 0] or a > hi[i, 0]:
+    for a in numba.prange(dims[0]):
+        x = origin[0] + a * spacing
+        for i in range(n):
+            if a < lo[i, 0] or a > hi[i, 0]:
+                continue
+            dx = x - points[i, 0]
+            for b in range(lo[i, 1], hi[i, 1] + 1):
+                y = origin[1] + b * spacing
+                dy = y - points[i, 1]
+                dxy = dx * dx + dy * dy
+                if dxy > r_sq:
                     continue
-                dx = x - points[i, 0]
-                for b in range(lo[i, 1], hi[i, 1] + 1):
-                    y = origin[1] + b * spacing
-                    dy = y - points[i, 1]
-                    dxy = dx * dx + dy * dy
-                    if dxy > r_sq:
+                base = (a * dims[1] + b) * dims[2]
+                for c in range(lo[i, 2], hi[i, 2] + 1):
+                    z = origin[2] + c * spacing
+                    dz = z - points[i, 2]
+                    d = dxy + dz * dz
+                    if d > r_sq:
                         continue
-                    base = (a * dims[1] + b) * dims[2]
-                    for c in range(lo[i, 2], hi[i, 2] + 1):
-                        z = origin[2] + c * spacing
-                        dz = z - points[i, 2]
-                        d = dxy + dz * dz
-                        if d > r_sq:
-                            continue
-                        j = node_nearest[base + c]
-                        ex, ey, ez = x - points[j, 0], y - points[j, 1], z - points[j, 2]
-                        if d < ex * ex + ey * ey + ez * ez:
-                            node_nearest[base + c] = i
+                    j = node_nearest[base + c]
+                    ex, ey, ez = x - points[j, 0], y - points[j, 1], z - points[j, 2]
+                    if d < ex * ex + ey * ey + ez * ez:
+                        node_nearest[base + c] = i
 
 
 @kernel(fastmath=True, inline="always")

@@ -232,9 +232,8 @@ def _fused(source, target, rot, trans, eps, icp_radius, steps, alpha):
 def consensus_batch(source, target, rots, transs, eps):
     """(C,) max-consensus rewards of C rigid motions of the source lattice's cloud onto the target's."""
     out = np.empty(rots.shape[0])
-    with numba.parallel_chunksize(4):  # dynamic chunks (core/jit.py)
-        for c in numba.prange(rots.shape[0]):
-            out[c] = _consensus(source, target, rots[c], transs[c], eps)
+    for c in numba.prange(rots.shape[0]):
+        out[c] = _consensus(source, target, rots[c], transs[c], eps)
     return out
 
 
@@ -242,7 +241,6 @@ def consensus_batch(source, target, rots, transs, eps):
 def fused_batch(source, target, rots, transs, eps, icp_radius, steps, alpha):
     """(C,) fused rewards alpha * now + (1 - alpha) * after ICP of C rigid motions (see :func:`_fused`)."""
     out = np.empty(rots.shape[0])
-    with numba.parallel_chunksize(4):  # dynamic chunks (core/jit.py)
-        for c in numba.prange(rots.shape[0]):
-            out[c] = _fused(source, target, rots[c], transs[c], eps, icp_radius, steps, alpha)
+    for c in numba.prange(rots.shape[0]):
+        out[c] = _fused(source, target, rots[c], transs[c], eps, icp_radius, steps, alpha)
     return out

@@ -23,7 +23,7 @@ from cemnet_ros.pipeline.voxel_map import VoxelMap
 from cemnet_ros.pipeline.voxel_map import compile_kernels as compile_map_kernels
 from cemnet_ros.pipeline.voxel_query import nearest_slot
 
-CHUNKS_PER_THREAD = 4  # partial sums per thread, handed out dynamically: balances uneven chunks and threads
+CHUNKS_PER_THREAD = 4  # partial sums per thread (numba gives each thread one contiguous block of them)
 N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs
 UPPER = np.triu_indices(6)  # the kernel's order of the J^T W J entries
 DAMPING = 1e-12  # relative to trace(H): keeps the solve defined along an exactly degenerate direction
@@ -80,10 +80,9 @@ def _chunk_sums(source, lo, hi, rot, trans, max_distance, kernel_scale, view, no
 def _normal_equations(source, rot, trans, max_distance, kernel_scale, view, normals, planarity, partial):
     """Per-chunk sums (rows of ``partial``, zeroed) over the pairs of ``source``, the chunks in parallel."""
     n, n_chunks = source.shape[0], partial.shape[0]
-    with numba.parallel_chunksize(1):  # chunks handed out one by one: a slow thread takes fewer
-        for c in numba.prange(n_chunks):
-            _chunk_sums(source, c * n // n_chunks, (c + 1) * n // n_chunks, rot, trans, max_distance, kernel_scale,
-                        view, normals, planarity, partial[c])
+    for c in numba.prange(n_chunks):
+        _chunk_sums(source, c * n // n_chunks, (c + 1) * n // n_chunks, rot, trans, max_distance, kernel_scale,
+                    view, normals, planarity, partial[c])
 
 
 def _linearise(target: VoxelMap, source: np.ndarray, rot: np.ndarray, trans: np.ndarray, max_distance: float,

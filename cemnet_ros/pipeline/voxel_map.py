@@ -7,8 +7,8 @@ carries a unit normal and a planarity weight in [0, 1], estimated once when it i
 around it, for the point-to-plane ICP of :mod:`cemnet_ros.pipeline.refine`.
 
 The storage and its kernels are :mod:`.voxel_hash` (hash table, insertion, pruning), the normals
-:mod:`.voxel_normals`, the queries :mod:`.voxel_query`; the numba policy (compiled once per process by
-:func:`compile_kernels`, never cached on disk) is :mod:`cemnet_ros.core.jit`'s.
+:mod:`.voxel_normals`, the queries :mod:`.voxel_query`; the numba policy (cached on disk, made ready at start by
+:func:`compile_kernels`) is :mod:`cemnet_ros.core.jit`'s.
 """
 from __future__ import annotations
 

@@ -115,7 +115,6 @@ def estimate_normals(voxels, n_new, voxel_size, m, pts, counts, normals, planari
 
     ``around`` (threads, (2 rings + 1)^3) is per-thread scratch space.
     """
-    with numba.parallel_chunksize(64):  # handed out dynamically: voxels differ in cost, threads in speed
-        for i in numba.prange(voxels.shape[0]):
-            _voxel_normals(voxels[i], n_new[i], voxel_size, m, pts, counts, normals, planarity, voxel_keys, table,
-                           shift, around[numba.get_thread_id()])
+    for i in numba.prange(voxels.shape[0]):
+        _voxel_normals(voxels[i], n_new[i], voxel_size, m, pts, counts, normals, planarity, voxel_keys, table,
+                       shift, around[numba.get_thread_id()])

@@ -89,11 +89,10 @@ def nearest_slot(qx, qy, qz, max_distance, view):
 @kernel(parallel=True)
 def nearest_batch(query, max_distance, view, dist, slots):
     """Distance (inf if none) and slot (-1) of each query's nearest map point within ``max_distance``."""
-    with numba.parallel_chunksize(64):  # dynamic chunks (core/jit.py)
-        for i in numba.prange(query.shape[0]):
-            d_sq, s = nearest_slot(query[i, 0], query[i, 1], query[i, 2], max_distance, view)
-            slots[i] = s
-            dist[i] = np.sqrt(d_sq) if s >= 0 else np.inf
+    for i in numba.prange(query.shape[0]):
+        d_sq, s = nearest_slot(query[i, 0], query[i, 1], query[i, 2], max_distance, view)
+        slots[i] = s
+        dist[i] = np.sqrt(d_sq) if s >= 0 else np.inf
 
 
 @kernel

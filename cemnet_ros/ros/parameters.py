@@ -8,7 +8,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
-from cemnet_ros.core.checkpoint import NAMED_WEIGHTS
+from cemnet_ros.core.weight_files import NAMED_WEIGHTS
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.ros.node_config import NodeConfig, configs_from_parameters, node_parameters
 

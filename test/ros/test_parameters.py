@@ -79,3 +79,13 @@ def test_a_corrupt_weights_file_ends_the_node_with_one_line(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
     assert run.stderr.strip().splitlines()[-1].startswith("align_node: error: the engine did not load"), run.stderr
+
+
+def test_the_node_and_its_parameters_import_without_torch():
+    """Torch (~2 s to import) loads in the engine's background thread, after the subscriptions exist."""
+    import subprocess
+    import sys
+
+    code = "import sys, cemnet_ros.ros.align_node; print('torch' in sys.modules)"
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert run.stdout.split() == ["False"], run.stderr
