@@ -17,6 +17,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from cemnet_ros.bench.metrics import ate_first_pose, end_drift_percent, percentile, relative_error
+from cemnet_ros.core.geometry import rotation_angle_deg
 from cemnet_ros.data.kitti import kitti_scans
 from cemnet_ros.io.console import progress
 from cemnet_ros.io.pointcloud_files import read_points
@@ -110,7 +111,7 @@ def sequence_metrics(sequence: Sequence, results: list[StepResult]) -> dict:
         steps.append({"index": k, "rte_m": rte, "rre_deg": rre, "accepted": results[k].accepted,
                       "recovered": results[k].recovered, "reason": results[k].reason,
                       "true_m": float(np.linalg.norm(truth[:3, 3])),
-                      "true_deg": float(np.degrees(np.arccos(np.clip((np.trace(truth[:3, :3]) - 1) / 2, -1, 1))))})
+                      "true_deg": rotation_angle_deg(truth[:3, :3])})
     off = [s for s in steps if not (s["rte_m"] <= OFF_M and s["rre_deg"] <= OFF_DEG)]
     worst = max(steps, key=lambda s: (s["rte_m"], s["rre_deg"])) if steps else None
     ms = [r.ms for r in results[1:]]
