@@ -97,7 +97,8 @@ class RegistrationConfig:
 
 @dataclass
 class GlobalSearchConfig:
-    """How wide and how long the global search looks (units: radians and engine units)."""
+    """How wide the global search looks (units: radians and engine units). It has no time budget: what a scan
+    yields never depends on the machine's speed."""
 
     n_scatter: int = param(2000, "candidates of the coarse scatter over yaw and translation", low=1)
     n_prior: int = param(500, "with a prior (recovery.prior 'network'): candidates drawn from it, N(mu0, "
@@ -118,8 +119,6 @@ class GlobalSearchConfig:
                               "network units)", low=1e-6)
     refine: CEMConfig = section(lambda: CEMConfig(n_candidates=100, n_iters=5, n_fused_iters=2),
                                 "the CEM that refines each hypothesis")
-    time_budget_s: float = param(1.0, "time budget (s) of the coarse scoring: the scatter stops at 50 %, the "
-                                 "resampling at 75 % of it (one chunk at least)", low=0.01, high=60.0)
 
     def __post_init__(self) -> None:
         if self.n_scatter < max(self.n_hypotheses, self.n_seeds) or min(self.n_hypotheses, self.n_seeds) < 1:
@@ -132,5 +131,3 @@ class GlobalSearchConfig:
             raise ValueError("coarse_epsilon must be > 0")
         if len(self.refine_sigma) != 6 or min(self.refine_sigma) <= 0:
             raise ValueError("refine_sigma must be six positive spreads")
-        if self.time_budget_s <= 0:
-            raise ValueError("time_budget_s must be > 0")

@@ -21,7 +21,6 @@ Everything is in the engine's units (clouds scaled to the ModelNet unit sphere) 
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Optional
 
@@ -33,7 +32,7 @@ from .engine import CEMNet
 from .geometry import action_to_matrix_np
 from .scoring import CandidateScorer
 
-SCATTER_CHUNK = 500  # candidates scored between two looks at the clock
+SCATTER_CHUNK = 500  # candidates scored at once (bounds the memory of one scoring call)
 
 
 @dataclass
@@ -61,8 +60,8 @@ def scatter(centre: np.ndarray, radius: float, config: GlobalSearchConfig, rng: 
             prior: Optional[SearchPrior] = None) -> np.ndarray:
     """(n_scatter, 6) actions: yaw uniform on the circle, translation uniform on a disc around ``centre`` (6,).
 
-    With a ``prior``, (n_prior + n_scatter, 6): the first ``n_prior`` from N(mu, (prior_scale * sigma)^2) (first:
-    the coarse scoring may stop at its deadline), the uniform ones drawn as without a prior.
+    With a ``prior``, (n_prior + n_scatter, 6): the first ``n_prior`` from N(mu, (prior_scale * sigma)^2), the
+    uniform ones drawn as without a prior.
     """
     uniform = _uniform(centre, radius, config.n_scatter, config, rng)
     if prior is None:
@@ -98,17 +97,13 @@ def distinct_best(actions: np.ndarray, cost: np.ndarray, config: GlobalSearchCon
     return np.array(kept)
 
 
-def _score_within(scorer: CandidateScorer, actions: np.ndarray, deadline: float) -> tuple[np.ndarray, np.ndarray]:
-    """Fused costs of ``actions`` in chunks until ``deadline`` (perf_counter; one chunk at least); scored ones."""
+def _scores(scorer: CandidateScorer, actions: np.ndarray) -> np.ndarray:
+    """Fused costs of all ``actions``, in chunks. Every candidate is scored, whatever the machine's speed: the
+    same scan always yields the same hypotheses."""
     if len(actions) == 0:
-        return actions, np.zeros(0)
-    costs: list[np.ndarray] = []
-    for chunk in np.array_split(actions, max(1, len(actions) // SCATTER_CHUNK)):
-        costs.append(scorer.cost(torch.from_numpy(chunk)[None], fused=True)[0].numpy())
-        if time.perf_counter() > deadline:
-            break
-    cost = np.concatenate(costs)
-    return actions[:len(cost)], cost
+        return np.zeros(0)
+    chunks = np.array_split(actions, max(1, len(actions) // SCATTER_CHUNK))
+    return np.concatenate([scorer.cost(torch.from_numpy(chunk)[None], fused=True)[0].numpy() for chunk in chunks])
 
 
 def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, radius: float,
@@ -120,7 +115,6 @@ def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, ra
     ``radius`` the disc's radius in units; ``prior`` (absolute actions, not relative to ``centre``) adds
     ``config.n_prior`` candidates drawn from it to the scatter.
     """
-    start = time.perf_counter()
     config = config or GlobalSearchConfig()
     rng = np.random.default_rng(seed)
     src = torch.as_tensor(np.asarray(source), dtype=torch.float32)[None]
@@ -129,11 +123,11 @@ def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, ra
                        icp_max_distance=2.0 * config.coarse_epsilon)
     scorer = CandidateScorer(src, tgt, coarse)
     actions = scatter(np.asarray(centre, dtype=np.float64), radius, config, rng, prior)
-    actions, cost = _score_within(scorer, actions, start + 0.5 * config.time_budget_s)
+    cost = _scores(scorer, actions)
     seeds = distinct_best(actions, cost, config, config.n_seeds)
     around = (seeds[:, None, :] + rng.normal(size=(len(seeds), config.n_per_seed, 6))
               * np.asarray(config.resample_sigma)).reshape(-1, 6)
-    around, around_cost = _score_within(scorer, around, start + 0.75 * config.time_budget_s)
+    around_cost = _scores(scorer, around)
     starts = distinct_best(np.vstack([actions, around]), np.concatenate([cost, around_cost]), config,
                            config.n_hypotheses)
     k = len(starts)

@@ -146,13 +146,16 @@ class ScanAligner:
         dt_ns = stamp_ns - self._last_stamp
         T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
         why = self._recovery_reason(dt_ns)
+        answers: list[Estimate] = []
         if not why:
-            estimate = self._tracker.track(frame, self._map, T_predicted, self._dt_ratio(dt_ns),
-                                           self._motion.last_pose)
-            if not estimate.failures:
+            estimate, answers = self._tracker.track(frame, self._map, T_predicted, self._dt_ratio(dt_ns),
+                                                    self._motion.last_pose)
+            doubts = estimate.failures or [self._health.unconfirmed(estimate.signals.fitness, estimate.support)]
+            if not any(doubts):
                 return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, "", start)
-            why = "tracking failed (" + "; ".join(estimate.failures) + ")"
-        estimate = self._recovery.recover(frame, self._map, T_predicted, self._T_odom_last_insert)
+            why = "tracking failed (" + "; ".join(doubts) + ")"
+        estimate = self._recovery.recover(frame, self._map, T_predicted, self._T_odom_last_insert, self._pose,
+                                          answers)
         return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, why, start)
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:

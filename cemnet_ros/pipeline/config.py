@@ -65,12 +65,16 @@ class TrackingConfig:
                        "network's, or N(0, identity_sigma) around the last pose", choices=PRIORS)
     identity_sigma: float = param(1.0, "spread of the identity prior (rad and network units; paper: N(0, I))",
                                   low=1e-4)
+    tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in fitness are a "
+                             "near-tie: the one next to the prediction is kept, flagged", low=0.01, high=1.0)
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:
             raise ValueError(f"prior must be one of {PRIORS}, not {self.prior!r}")
         if self.identity_sigma <= 0:
             raise ValueError("identity_sigma must be > 0")
+        if not 0.0 < self.tie_ratio <= 1.0:
+            raise ValueError("tie_ratio must lie in (0, 1]")
 
 
 @dataclass
@@ -87,8 +91,9 @@ class PolishConfig:
 
     iters: int = param(10, "point-to-plane polish iterations (at most)", low=1)
     points: int = param(3000, "source points the polish uses at most (a seeded subset of the voxel cloud)", low=10)
-    inlier_distance: float = param(2.0, "a point with a map point this close (frame voxels) counts for the "
-                                   "fitness", low=1e-3)
+    inlier_distance: float = param(2.0, "a point with a map point this close (frame voxels) ...", low=1e-3)
+    inlier_residual: float = param(0.05, "... and within this of its plane (m; the sensor's noise, not the "
+                                   "scene's size) counts for the fitness", low=1e-4)
 
 
 @dataclass
@@ -101,7 +106,7 @@ class RecoveryConfig:
     points: int = param(512, "source and map points the global search scores (the polish brings the "
                                  "precision)", low=32)
     gap: float = param(1.0, "a stamp gap longer than this (s) triggers the global search", low=1e-3)
-    ambiguity_ratio: float = param(0.9, "a distinct hypothesis this close in fitness makes the answer ambiguous",
+    ambiguity_ratio: float = param(0.95, "a distinct hypothesis this close in fitness makes the answer ambiguous",
                                    low=0.01, high=1.0)
     polish_distance: float = param(6.0, "first pairing distance of a hypothesis' polish (frame voxels)", low=0.1)
     polish_iters: int = param(30, "its iterations at that distance (a hypothesis can be degrees off)", low=1)

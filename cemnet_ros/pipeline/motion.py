@@ -8,18 +8,17 @@ from __future__ import annotations
 from typing import Optional
 
 import numpy as np
-from scipy.linalg import expm, logm
+
+from cemnet_ros.core.geometry import se3_exp, se3_log
 
 
 def se3_power(transform: np.ndarray, ratio: float) -> np.ndarray:
-    """``transform ** ratio`` on SE(3): the screw motion scaled by ``ratio`` (exp(ratio * log T))."""
+    """``transform ** ratio`` on SE(3): the screw motion scaled by ``ratio`` (exp(ratio * log T), closed form)."""
     if ratio == 1.0:
         return np.array(transform, dtype=np.float64)
     if ratio == 0.0:
         return np.eye(4)
-    out = np.real(expm(ratio * np.real(logm(np.asarray(transform, dtype=np.float64)))))
-    out[3] = (0.0, 0.0, 0.0, 1.0)
-    return out
+    return se3_exp(ratio * se3_log(transform))
 
 
 class ConstantVelocity:

@@ -80,11 +80,13 @@ class PairMode:
         if self._motion.last_pose is None:
             return "no pose yet", self.recovery.recover(frame, target_map, np.eye(4))
         T_predicted = self._motion.predict(stamp_ns)
-        estimate = self.tracker.track(frame, target_map, T_predicted, 1.0, self._motion.last_pose)
-        if not estimate.failures:
+        estimate, answers = self.tracker.track(frame, target_map, T_predicted, 1.0, self._motion.last_pose)
+        doubts = estimate.failures or [self.tracker.judge.health.unconfirmed(estimate.signals.fitness,
+                                                                             estimate.support)]
+        if not any(doubts):
             return "", estimate
-        why = "tracking failed (" + "; ".join(estimate.failures) + ")"
-        return why, self.recovery.recover(frame, target_map, T_predicted)
+        why = "tracking failed (" + "; ".join(doubts) + ")"
+        return why, self.recovery.recover(frame, target_map, T_predicted, rivals=answers)
 
     def _target_map(self, target: np.ndarray, frame_id: str, stamp_ns: int, now_ns: Optional[int]
                     ) -> tuple[VoxelMap, list]:

@@ -3,12 +3,14 @@
 It runs on the first pair, after a stamp gap, when tracking failed or on request: the search
 (:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation; with
 ``recovery.prior`` 'network' also candidates drawn from the sampling network's prior) returns distinct
-hypotheses; each one close to the best in fitness is polished and judged, and an ambiguity check between
-distinct near-ties keeps a symmetric scene from being published as a confident answer.
+hypotheses; each one close to the best in fitness is polished and judged. The guess itself (the motion
+prediction) and the last pose are polished too and compete with them (:mod:`.hypotheses`): a distant hypothesis
+never replaces a near answer of similar fitness, and distinct near-ties keep a symmetric scene from being
+published as a confident answer.
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 import torch
@@ -20,14 +22,13 @@ from cemnet_ros.core.registration import NETWORK_MIN_POINTS
 from cemnet_ros.pipeline.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.frame import Frame
-from cemnet_ros.pipeline.health import disagreement
+from cemnet_ros.pipeline.hypotheses import choose
 from cemnet_ros.pipeline.preprocess import subsample, voxel_downsample
 from cemnet_ros.pipeline.tracking import PREDICTION_SPREADS, map_sample, wide_polish
 from cemnet_ros.pipeline.verdict import Estimate, StepJudge
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 POLISH_FRACTION = 0.8  # hypotheses whose CEM fitness is this close to the best one's get polished
-DISTINCT_M, DISTINCT_RAD = 1.0, np.radians(5.0)  # answers farther apart are distinct hypotheses, not one basin
 
 
 def prior_registrar(config: AlignerConfig, given: Optional[Registrar] = None) -> Optional[Registrar]:
@@ -51,8 +52,11 @@ class Recovery:
         self.prior = prior  # its network's mu0, sigma0 draw part of the scatter (None: uniform only)
 
     def recover(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray,
-                T_fallback: Optional[np.ndarray] = None) -> Estimate:
-        """The global CEM search around ``T_guess``, each distinct hypothesis polished; the best one judged.
+                T_fallback: Optional[np.ndarray] = None, T_last: Optional[np.ndarray] = None,
+                rivals: Sequence[Estimate] = ()) -> Estimate:
+        """The global CEM search around ``T_guess``, each distinct hypothesis polished, competing with
+        ``rivals`` (tracking's answers) or, without them, the polished ``T_guess`` and ``T_last`` (the last
+        pose). The chosen answer fails unless it is confirmed (:meth:`~.health.HealthMonitor.unconfirmed`).
 
         ``T_fallback``: where to search instead when the map has no points near the guess (a wild prediction
         left the map: where the map last grew). The scan is placed at the guess and the engine's units are
@@ -74,17 +78,28 @@ class Recovery:
         source_units, target_units = apply_transform(to_units, source), apply_transform(to_units, target)
         hypotheses = global_search(source_units, target_units, np.zeros(6), rec.radius / frame.scale, rec.search,
                                    seed=seed, prior=self._network_prior(source_units, target_units))
-        estimates = []
+        T_local = [] if rivals else [T_guess] + ([] if T_last is None else [T_last])
+        estimates = list(rivals) + [self._judged(frame, target_map, T_guess, T_start) for T_start in T_local]
         for hypothesis in hypotheses:
             if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
                 break  # far behind the best: not worth a polish, nor a rival
             T_cem = from_units @ hypothesis.T_target_source @ to_units @ T_guess
             T_cem[3] = (0.0, 0.0, 0.0, 1.0)
-            polish = wide_polish(cfg, frame, target_map, T_cem)
-            estimates.append(self.judge.judge(frame, target_map, T_guess, T_cem, polish, 0.0, recovered=True,
-                                              prediction_std=rec.radius))
-        estimates.sort(key=lambda e: -e.signals.fitness)
-        return self._resolve_ambiguity(estimates, T_guess)
+            estimates.append(self._judged(frame, target_map, T_guess, T_cem))
+        rotation, translation = self.spread.spread()
+        near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
+        chosen = choose(estimates, T_guess, rec.ambiguity_ratio, near)
+        chosen.recovered = True  # this step ran the global search, whichever answer won
+        why = self.judge.health.unconfirmed(chosen.signals.fitness, chosen.support)
+        if why and not chosen.failures:
+            chosen.failures.append(why)
+        return chosen
+
+    def _judged(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, T_start: np.ndarray) -> Estimate:
+        """The answer polished (widely: a start can be a metre or degrees off) from ``T_start``, judged."""
+        polish = wide_polish(self.config, frame, target_map, T_start)
+        return self.judge.judge(frame, target_map, T_guess, T_start, polish, 0.0, recovered=True,
+                                prediction_std=self.config.recovery.radius)
 
     def _network_prior(self, source: np.ndarray, target: np.ndarray) -> Optional[SearchPrior]:
         """The network's raw mu0, sigma0 for the search's clouds in units (None: no network, or too few points)."""
@@ -93,34 +108,3 @@ class Recovery:
         clouds = (torch.as_tensor(cloud, dtype=torch.float32)[None] for cloud in (source, target))
         result = self.prior.register_batch(*clouds, run_cem=False)
         return SearchPrior(result.mu0[0], result.sigma0[0])
-
-    def _resolve_ambiguity(self, estimates: list[Estimate], T_guess: np.ndarray) -> Estimate:
-        """The fittest hypothesis, or among distinct near-ties the one next to the guess (a symmetric scene).
-
-        A tie resolved by a guess within the tracking spread is flagged with a note; ties all far from the
-        guess are a failure ("ambiguous").
-        """
-        ratio = self.config.recovery.ambiguity_ratio
-        best = estimates[0]
-        ties = [best]
-        for estimate in estimates[1:]:
-            if estimate.signals.fitness >= ratio * best.signals.fitness and all(
-                    _distinct(estimate.T_odom_sensor, kept.T_odom_sensor) for kept in ties):
-                ties.append(estimate)
-        if len(ties) == 1:
-            return best
-        rotation, translation = self.spread.spread()
-        nearest = min(ties, key=lambda e: e.offset_from(T_guess)[0])
-        metres, radians = nearest.offset_from(T_guess)
-        summary = f"{len(ties)} distinct hypotheses within {ratio:.2f} of the best fitness"
-        if metres <= PREDICTION_SPREADS * translation and radians <= PREDICTION_SPREADS * rotation:
-            nearest.notes.append(f"symmetric scene: {summary}, the one next to the motion prediction kept")
-            return nearest
-        best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")
-        return best
-
-
-def _distinct(T_a: np.ndarray, T_b: np.ndarray) -> bool:
-    """Two answers that are distinct hypotheses, not one basin."""
-    metres, radians = disagreement(T_a, T_b)
-    return metres > DISTINCT_M or radians > DISTINCT_RAD

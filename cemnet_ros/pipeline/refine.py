@@ -23,7 +23,7 @@ from cemnet_ros.pipeline.voxel_map import VoxelMap
 from cemnet_ros.pipeline.voxel_map import compile_kernels as compile_map_kernels
 from cemnet_ros.pipeline.voxel_query import nearest_slot
 
-CHUNKS_PER_THREAD = 4  # partial sums per thread (numba gives each thread one contiguous block of them)
+N_CHUNKS = 32  # partial sums; a fixed count: the sums do not depend on the thread count
 N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs
 UPPER = np.triu_indices(6)  # the kernel's order of the J^T W J entries
 DAMPING = 1e-12  # relative to trace(H): keeps the solve defined along an exactly degenerate direction
@@ -89,7 +89,7 @@ def _linearise(target: VoxelMap, source: np.ndarray, rot: np.ndarray, trans: np.
                kernel_scale: float) -> tuple[np.ndarray, np.ndarray, float, int]:
     """(J^T W J (6, 6), J^T W r (6,), weighted residual variance, pairs) of ``source`` moved by (rot, trans)."""
     _, normals, planarity = target.slot_arrays()
-    partial = np.zeros((CHUNKS_PER_THREAD * numba.get_num_threads(), N_SUMS))
+    partial = np.zeros((N_CHUNKS, N_SUMS))
     _normal_equations(source, rot, trans, max_distance, kernel_scale, target.view(), normals, planarity, partial)
     sums = partial.sum(axis=0)
     hessian = np.empty((6, 6))

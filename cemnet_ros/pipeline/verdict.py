@@ -54,6 +54,7 @@ class Estimate:
     recovered: bool
     free_directions: np.ndarray  # (6, k) normalised directions the scene leaves unconstrained
     length: float  # the lever arm of that normalisation
+    support: int = 1  # how many of the competing starts reached this answer (:mod:`.hypotheses`)
 
     def offset_from(self, T_reference: np.ndarray) -> tuple[float, float]:
         """(metres, radians) from ``T_reference`` along the constrained directions only."""
@@ -81,10 +82,6 @@ class StepJudge:
         self.config = config
         self.health = health
 
-    def resolution(self, frame: Frame) -> float:
-        """Metres the CEM's max-consensus reward can tell apart: epsilon * scale."""
-        return self.config.registration.cem.epsilon * frame.scale
-
     def judge(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, T_cem: np.ndarray,
               polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float) -> Estimate:
         """The verdict on the polished ``polish.T_target_source`` (CEM answer ``T_cem``, final CEM spread
@@ -93,10 +90,10 @@ class StepJudge:
         T_final = polish.T_target_source
         conditioning = Conditioning.of(polish.hessian, frame.length)
         fitness = target_map.inlier_fraction(frame.polish, T_final, self.config.polish.inlier_distance
-                                             * frame.polish_voxel)
+                                             * frame.polish_voxel, self.config.polish.inlier_residual)
         metres, radians = disagreement(T_cem, T_final)
         signals = Signals(fitness, metres, radians, conditioning.ratio, spread_m)
-        failures = self.health.failures(signals, self.resolution(frame), recovery=recovered)
+        failures = self.health.failures(signals)
         if polish.n_pairs < MIN_POLISH_PAIRS:
             failures.append(f"only {polish.n_pairs} point-to-plane pairs")
         notes = []

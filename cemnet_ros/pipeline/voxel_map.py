@@ -111,13 +111,23 @@ class VoxelMap:
         index[found] = first_index[slots[found] // m] + slots[found] % m
         return dist, index
 
-    def inlier_fraction(self, source: np.ndarray, T_map_source: np.ndarray, distance: float) -> float:
-        """Fraction of ``source`` (source frame) with a map point within ``distance`` after ``T_map_source``."""
+    def inlier_fraction(self, source: np.ndarray, T_map_source: np.ndarray, distance: float,
+                        residual: float = np.inf) -> float:
+        """Fraction of ``source`` (source frame) that lies on the map after ``T_map_source``: the nearest map
+        point within ``distance`` and, within ``residual`` of its plane (of the point itself where it has no
+        normal). The plane test tells centimetres apart on any map density: a nearest-point radius does not."""
         source = np.asarray(source, dtype=np.float64).reshape(-1, 3)
         if len(source) == 0:
             return 0.0
-        dist, _ = self._query(apply_transform(np.asarray(T_map_source, dtype=np.float64), source), distance)
-        return float(np.count_nonzero(np.isfinite(dist))) / len(source)
+        moved = apply_transform(np.asarray(T_map_source, dtype=np.float64), source)
+        dist, slots = self._query(moved, distance)
+        found = slots >= 0
+        if not np.isfinite(residual):
+            return float(np.count_nonzero(found)) / len(source)
+        slots, dist = slots[found], dist[found]
+        offsets = np.einsum("ij,ij->i", self._normals[slots], moved[found] - self._pts[slots])
+        off_plane = np.where(self._planarity[slots] > 0.0, np.abs(offsets), dist)
+        return float(np.count_nonzero(off_plane <= residual)) / len(source)
 
     def sample(self, n: int, centre: np.ndarray, radius: float, seed: int = 0) -> np.ndarray:
         """At most ``n`` map points within ``radius`` of ``centre``: a seeded random subset (the CEM's target)."""
