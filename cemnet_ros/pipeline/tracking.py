@@ -36,8 +36,9 @@ def wide_polish(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_sta
     """A polish from an answer that may be a metre or degrees off: wide pairing on a subset first (it finds the
     basin), then the fine pairing on every polish point (it brings the precision)."""
     rec, voxel = config.recovery, frame.polish_voxel
-    coarse = point_to_plane_icp(target_map, frame.polish[:WIDE_POINTS], T_start, rec.polish_distance * voxel,
-                                rec.polish_iters)
+    # Every k-th point: the polish points are in scan order, so a stride spans the whole scan (a prefix is a wedge).
+    subset = frame.polish[::max(1, len(frame.polish) // WIDE_POINTS)]
+    coarse = point_to_plane_icp(target_map, subset, T_start, rec.polish_distance * voxel, rec.polish_iters)
     return point_to_plane_icp(target_map, frame.polish, coarse.T_target_source, 2.0 * voxel, config.polish.iters)
 
 
