@@ -9,7 +9,8 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
 3. **track** (:mod:`.tracking`): the CEM around the prediction against a sample of the map, then a
    point-to-plane polish against the map itself;
 4. **judge** the step without ground truth (:mod:`.verdict`: fitness, agreement, conditioning, spread);
-5. **recover** (:mod:`.recovery`) when tracking failed, on the first pair, after a stamp gap or on request:
+5. **recover** (:mod:`.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit at the
+   running level), on the first pair or on request:
    the global CEM search (yaw over the full circle, metres of translation), then the polish, judged the same
    way plus an ambiguity check between distinct hypotheses;
 6. **commit**: a good step moves the pose, the map, the motion model and the adaptive spread; a failed one is
@@ -145,13 +146,13 @@ class ScanAligner:
             return self._start_trajectory(frame, stamp_ns, start)
         dt_ns = stamp_ns - self._last_stamp
         T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
-        why = self._recovery_reason(dt_ns)
+        why = self._pending_recovery
         answers: list[Estimate] = []
         if not why:
             estimate, answers = self._tracker.track(frame, self._map, T_predicted, self._dt_ratio(dt_ns),
                                                     self._motion.last_pose)
-            doubts = estimate.failures or [self._health.unconfirmed(estimate.signals.fitness, estimate.support)]
-            if not any(doubts):
+            doubts = self._tracker.doubts(estimate, after_gap=dt_ns * 1e-9 > self.config.recovery.gap)
+            if not doubts:
                 return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, "", start)
             why = "tracking failed (" + "; ".join(doubts) + ")"
         estimate = self._recovery.recover(frame, self._map, T_predicted, self._T_odom_last_insert, self._pose,
@@ -182,13 +183,6 @@ class ScanAligner:
         self._health.reset()
         self._pending_recovery = ""
         self._failures_in_a_row = 0
-
-    def _recovery_reason(self, dt_ns: int) -> str:
-        if self._pending_recovery:
-            return self._pending_recovery
-        if dt_ns * 1e-9 > self.config.recovery.gap:
-            return f"stamp gap {dt_ns * 1e-9:.3f} s"
-        return ""
 
     def _dt_ratio(self, dt_ns: int) -> float:
         return 1.0 if not self._period_ns else dt_ns / self._period_ns

@@ -105,11 +105,12 @@ class RecoveryConfig:
                                    "over the full circle", low=0.0)
     points: int = param(512, "source and map points the global search scores (the polish brings the "
                                  "precision)", low=32)
-    gap: float = param(1.0, "a stamp gap longer than this (s) triggers the global search", low=1e-3)
+    gap: float = param(1.0, "after a stamp gap longer than this (s) tracking's answer must fit at "
+                       "health.confirm_ratio x the running level, or the global search competes with it", low=1e-3)
     ambiguity_ratio: float = param(0.95, "a distinct hypothesis this close in fitness makes the answer ambiguous",
                                    low=0.01, high=1.0)
     polish_distance: float = param(6.0, "first pairing distance of a hypothesis' polish (frame voxels)", low=0.1)
-    polish_iters: int = param(30, "its iterations at that distance (a hypothesis can be degrees off)", low=1)
+    polish_iters: int = param(60, "its iterations at that distance (a hypothesis can be degrees off)", low=1)
     restart_after: int = param(3, "consecutive failed steps after which the map restarts from the scan (lost)",
                                low=1)
     prior: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_prior "

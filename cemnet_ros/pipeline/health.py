@@ -94,13 +94,15 @@ class HealthMonitor:
             out.append(f"fitness {s.fitness:.3f} fell below {c.fitness_drop:.2f} x its running level {self.level:.3f}")
         return out
 
-    def unconfirmed(self, fitness: float, support: int) -> str:
-        """Why an answer cannot be vouched for although it passed :meth:`failures` ("" = it can): one start
-        alone reached it and it fits clearly worse than the recent good steps (a wrong local minimum does)."""
+    def unconfirmed(self, fitness: float, support: int, after_gap: bool = False) -> str:
+        """Why an answer cannot be vouched for although it passed :meth:`failures` ("" = it can): it fits clearly
+        worse than the recent good steps and one start alone reached it (a wrong local minimum does), or, after a
+        stamp gap, whatever its support (a prediction over a gap is no evidence)."""
         floor = self.config.confirm_ratio * (self.level or 0.0)
-        if support >= 2 or fitness >= floor:
+        if fitness >= floor or (support >= 2 and not after_gap):
             return ""
-        return f"unconfirmed: fitness {fitness:.3f} < {floor:.3f}, reached from one start only"
+        alone = "after a stamp gap" if after_gap else "reached from one start only"
+        return f"unconfirmed: fitness {fitness:.3f} < {floor:.3f}, {alone}"
 
     def degenerate(self, signals: Signals) -> bool:
         return signals.conditioning < self.config.min_conditioning

@@ -81,9 +81,8 @@ class PairMode:
             return "no pose yet", self.recovery.recover(frame, target_map, np.eye(4))
         T_predicted = self._motion.predict(stamp_ns)
         estimate, answers = self.tracker.track(frame, target_map, T_predicted, 1.0, self._motion.last_pose)
-        doubts = estimate.failures or [self.tracker.judge.health.unconfirmed(estimate.signals.fitness,
-                                                                             estimate.support)]
-        if not any(doubts):
+        doubts = self.tracker.doubts(estimate)
+        if not doubts:
             return "", estimate
         why = "tracking failed (" + "; ".join(doubts) + ")"
         return why, self.recovery.recover(frame, target_map, T_predicted, rivals=answers)

@@ -1,6 +1,6 @@
 """Recovery (step 5 of the recipe in :mod:`.aligner`): the global CEM search when tracking cannot be trusted.
 
-It runs on the first pair, after a stamp gap, when tracking failed or on request: the search
+It runs on the first pair, when tracking failed or is unconfirmed, or on request: the search
 (:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation; with
 ``recovery.prior`` 'network' also candidates drawn from the sampling network's prior) returns distinct
 hypotheses; each one close to the best in fitness is polished and judged. The guess itself (the motion

@@ -90,6 +90,14 @@ class Tracker:
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
         return choose(estimates, T_predicted, cfg.tracking.tie_ratio, near), estimates
 
+    def doubts(self, estimate: Estimate, after_gap: bool = False) -> list[str]:
+        """Why tracking's answer cannot stand without the global search (empty: it can): its failures, or it is
+        unconfirmed (:meth:`~.health.HealthMonitor.unconfirmed`)."""
+        if estimate.failures:
+            return list(estimate.failures)
+        why = self.judge.health.unconfirmed(estimate.signals.fitness, estimate.support, after_gap)
+        return [why] if why else []
+
     def _settled(self, estimate: Estimate) -> bool:
         """An answer that fits as well as the recent good steps did (their running fitness level)."""
         level = self.judge.health.level
