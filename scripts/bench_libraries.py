@@ -83,13 +83,15 @@ def main(argv: Optional[list[str]] = None) -> int:
             del balm.scans[:args.balm_first], balm.poses[:args.balm_first], balm.stamps_ns[:args.balm_first]
             sequences.append(balm)
         results: dict = {"cores": os.cpu_count(), "threads": THREADS, "versions": versions(),
-                         "kernel_digest": kernel_digest(), "args": vars(args), "sequences": {}}
+                         "kernel_digest": kernel_digest(), "args": vars(args), "load_average_start": os.getloadavg(),
+                         "sequences": {}}
         for seq in sequences:
             log(f"{seq.name}: {len(seq.scans)} scans")
             results["sequences"][seq.name] = bench_sequence(seq, peers, args.pairs, args.map_scans, args.seeds,
                                                             args.repeats)
         if args.startup_runs:
             results["startup"] = startup([OURS, *peers], args.startup_runs, cold=not args.no_cold)
+        results["load_average_end"] = os.getloadavg()  # other work on the machine during the run
         print(libraries_table(results))
         write_report(args.out, json_text(results))
         print(f"wrote {args.out}")

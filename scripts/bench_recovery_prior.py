@@ -12,9 +12,10 @@ top of a uniform N (``--prior-fractions``: 1/4, 1/2); ``oracle+N`` (``--oracle``
 the true motion: the most a network could give; ``--lean``: each of them again with fewer seeds, resampled
 candidates and hypotheses (what a prior that is right could afford).
 
-The search has no time budget: the sizes decide the work, not the machine's load. Issue 12's criterion: a prior pays if it reaches the default's recall at <= 0.5x its time
-or a higher recall than a uniform scatter that took at least as long (by the ratio of medians and the paired ratio
-both, each against the default). Timings on a shared machine are noisy.
+The search has no time budget: the sizes decide the work, not the machine's load. Issue 12's criterion: a prior
+pays if it reaches the default's recall at <= 0.5x its time or a higher recall than a uniform scatter that took at
+least as long (by the ratio of medians and the paired ratio both, each against the default).
+Timings on a shared machine are noisy.
 
     python scripts/bench_recovery_prior.py --pairs 2 --seeds 0                  # a smoke run
     python scripts/bench_recovery_prior.py --pairs 20 --seeds 0 1 --weights scan=scan --out results/recovery_prior.json
@@ -89,8 +90,7 @@ def config_for(variant: Variant, args: argparse.Namespace) -> AlignerConfig:
     """The node's defaults, with this variant's scatter and prior (the oracle plays the network's part)."""
     base = AlignerConfig()
     search = dataclasses.replace(base.recovery.search, n_scatter=variant.n_scatter, n_prior=args.n_prior,
-                                 prior_scale=args.prior_scale,
-                                 **(LEAN if variant.lean else {}))
+                                 prior_scale=args.prior_scale, **(LEAN if variant.lean else {}))
     recovery = dataclasses.replace(base.recovery, search=search, weights=args.weights.get(variant.weights, ""),
                                    allow_pickle=args.allow_pickle,
                                    prior="uniform" if variant.prior == "uniform" else "network")

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Mapping, Optional
 
 import numba
 import numpy as np
@@ -80,7 +80,7 @@ def versions() -> dict[str, Optional[str]]:
 
 
 # -- timing -----------------------------------------------------------------------------------------------------
-def interleaved(calls: dict[str, Callable[[], Any]], rounds: int, times: dict[str, list[float]]) -> dict[str, Any]:
+def interleaved(calls: Mapping[str, Callable[[], Any]], rounds: int, times: dict[str, list[float]]) -> dict[str, Any]:
     """Run every call once per round, in turn; append each one's ms to ``times[name]``. Returns the last outputs."""
     outputs = {}
     for _ in range(rounds):
@@ -105,11 +105,16 @@ def timing_summary(times: dict[str, list[float]]) -> dict[str, dict]:
 # -- inputs -----------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Stage:
-    """One point-to-plane polish run: the first ``points`` of the polish subset, pairs within ``max_distance``."""
+    """One point-to-plane polish run: about ``points`` of the polish points, pairs within ``max_distance``."""
 
     points: int
     max_distance: float  # m
     iters: int
+
+    def subset(self, polish: np.ndarray) -> np.ndarray:
+        """Every k-th polish point, about ``points`` of them: the polish points are in scan order, so a stride
+        spans the whole scan (as ``tracking.wide_polish``; a prefix would be a wedge)."""
+        return polish[::max(1, len(polish) // self.points)]
 
 
 def polish_stages(config: AlignerConfig, voxel: float) -> list[Stage]:
@@ -215,7 +220,7 @@ class OursMap:
         """(T_target_source, Gauss-Newton steps taken) of the stages in turn."""
         T_target_source, steps = initial, 0
         for stage in stages:
-            result = point_to_plane_icp(self.map, step.polish[:stage.points], T_target_source, stage.max_distance,
+            result = point_to_plane_icp(self.map, stage.subset(step.polish), T_target_source, stage.max_distance,
                                         stage.iters, convergence=CONVERGENCE)
             T_target_source, steps = result.T_target_source, steps + result.iterations
         return T_target_source, steps
@@ -254,7 +259,7 @@ class SmallGicpCloudMap:
         gicp_source = None if plane else covariance_cloud(self.sg, step.dense)
         T_target_source, steps = initial, 0
         for stage in stages:
-            source = self.sg.PointCloud(step.polish[:stage.points]) if plane else gicp_source
+            source = self.sg.PointCloud(stage.subset(step.polish)) if plane else gicp_source
             result = self.sg.align(self.cloud, source, self.tree, T_target_source,
                                    registration_type=self.registration_type,
                                    max_correspondence_distance=stage.max_distance, num_threads=THREADS,
@@ -302,7 +307,7 @@ class KissMap:
         T_target_source = initial
         for stage in stages:
             registration = self.kiss.registration.Registration(stage.iters, CONVERGENCE, THREADS)
-            T_target_source = registration.align_points_to_map(step.polish[:stage.points], self.map, T_target_source,
+            T_target_source = registration.align_points_to_map(stage.subset(step.polish), self.map, T_target_source,
                                                                stage.max_distance, stage.max_distance / 3.0)
         return np.asarray(T_target_source), None
 
@@ -368,11 +373,12 @@ def bench_downsample(sequence: Sequence, frames: list[Frame], config: AlignerCon
     kept: dict[str, list[int]] = {}
     for points in progress(sequence.scans[:n_scans], desc=f"{sequence.name}: downsample"):
         scan = cropped(points, config.preprocess)
+        kept.setdefault("in", []).append(len(scan))
         outputs = interleaved(downsample_calls(scan, frames[0].voxel, peers), rounds, times)
         for name, out in outputs.items():
             kept.setdefault(name, []).append(len(out))
-    return {"ms": timing_summary(times), "points_in": int(np.mean([len(s) for s in sequence.scans[:n_scans]])),
-            "points_out": {name: int(np.mean(n)) for name, n in kept.items()}}
+    points = {name: int(np.mean(n)) for name, n in kept.items()}
+    return {"ms": timing_summary(times), "points_in": points.pop("in"), "points_out": points}
 
 
 def bench_map_update(frames: list[Frame], poses: list[np.ndarray], config: AlignerConfig,

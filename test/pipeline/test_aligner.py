@@ -88,15 +88,24 @@ def test_a_kidnapped_sensor_is_found_again_within_one_scan():
     assert within(*step_error(poses, steps, 4), 0.05, 0.2)
 
 
-def test_stamp_gap_and_request_trigger_the_global_search():
+def test_a_stamp_gap_is_tracked_when_it_fits_and_searched_when_it_does_not():
     aligner = ScanAligner(FAST)
-    poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(5)]
-    stamps = [0, PERIOD, 2 * PERIOD, 2 * PERIOD + 2_000_000_000, 2 * PERIOD + 2_100_000_000]
+    poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(4)]
+    poses.append(make_transform(yaw=np.radians(50.0), t=(4.0, 2.0, 0.0)))  # after a second gap: far from both starts
+    gap = 2_000_000_000
+    stamps = [0, PERIOD, 2 * PERIOD, 2 * PERIOD + gap, 2 * PERIOD + 2 * gap]
     steps = drive(aligner, poses, stamps=stamps)
-    assert steps[3].recovered and "stamp gap" in steps[3].recovery_reason and steps[3].accepted
-    assert not steps[4].recovered
+    assert not steps[3].recovered and steps[3].accepted, steps[3].reason  # a keyframe stream is normal input
+    assert within(*step_error(poses, steps, 3), 0.03, 0.15)
+    assert steps[4].recovered and steps[4].accepted, (steps[4].recovery_reason, steps[4].reason)
+    assert within(*step_error(poses, steps, 4), 0.05, 0.2)
+
+
+def test_a_request_triggers_the_global_search():
+    aligner = ScanAligner(FAST)
+    drive(aligner, [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(3)])
     aligner.request_recovery()
-    step = aligner.process(street_scan(WORLD, make_transform(t=(2.5, 0, 0)), np.random.default_rng(4)), 3_000_000_000)
+    step = aligner.process(street_scan(WORLD, make_transform(t=(1.5, 0, 0)), np.random.default_rng(4)), 3 * PERIOD)
     assert step.recovered and step.recovery_reason == "requested" and step.accepted
 
 

@@ -45,26 +45,34 @@ def test_spread_is_clipped():
 
 def test_each_failure_signal_flags_on_its_own():
     monitor = HealthMonitor(HealthConfig())
-    assert monitor.failures(GOOD, 1.0) == [] and not monitor.degenerate(GOOD)
-    assert "low fitness" in monitor.failures(with_(fitness=0.1), 1.0)[0]
-    assert "disagree" in monitor.failures(with_(disagreement_m=2.0), 1.0)[0]
-    assert monitor.failures(with_(disagreement_m=2.0), 10.0) == []  # within 0.4 resolutions of 10 m
-    assert "disagree" in monitor.failures(with_(disagreement_rad=0.2), 1.0)[0]
-    assert "spread" in monitor.failures(with_(spread_m=5.0), 1.0)[0]
-    assert monitor.failures(with_(spread_m=5.0, disagreement_m=2.0), 1.0, recovery=True) == []
-    assert monitor.degenerate(with_(conditioning=0.001)) and monitor.failures(with_(conditioning=0.001), 1.0) == []
+    assert monitor.failures(GOOD) == [] and not monitor.degenerate(GOOD)
+    assert "low fitness" in monitor.failures(with_(fitness=0.1))[0]
+    # the CEM's disagreement with the polish and its spread are recorded, not judged: they are in engine units
+    assert monitor.failures(with_(disagreement_m=2.0, disagreement_rad=0.2, spread_m=5.0)) == []
+    assert monitor.degenerate(with_(conditioning=0.001)) and monitor.failures(with_(conditioning=0.001)) == []
 
 
 def test_fitness_is_judged_against_its_running_level():
     monitor = HealthMonitor(HealthConfig(min_fitness=0.2, fitness_drop=0.7, level_memory=0.5))
-    assert monitor.failures(with_(fitness=0.4), 1.0) == []  # no level yet: the absolute floor only
+    assert monitor.failures(with_(fitness=0.4)) == []  # no level yet: the absolute floor only
     for _ in range(20):
         monitor.accept(0.9)
     assert monitor.level == pytest.approx(0.9)
-    assert "running level" in monitor.failures(with_(fitness=0.5), 1.0)[0]
-    assert monitor.failures(with_(fitness=0.7), 1.0) == []
+    assert "running level" in monitor.failures(with_(fitness=0.5))[0]
+    assert monitor.failures(with_(fitness=0.7)) == []
     monitor.reset()
     assert monitor.level is None
+
+
+def test_an_answer_below_the_level_needs_a_second_start_and_after_a_gap_the_level_itself():
+    monitor = HealthMonitor(HealthConfig(confirm_ratio=0.9))
+    assert monitor.unconfirmed(0.1, 1) == ""  # no level yet: nothing to confirm against
+    monitor.accept(0.8)
+    assert monitor.unconfirmed(0.75, 1) == ""  # at 0.9 x the level
+    assert "one start only" in monitor.unconfirmed(0.6, 1)
+    assert monitor.unconfirmed(0.6, 2) == ""  # two starts reached it
+    assert "stamp gap" in monitor.unconfirmed(0.6, 3, after_gap=True)
+    assert monitor.unconfirmed(0.75, 1, after_gap=True) == ""
 
 
 def corridor_hessian(length=10.0):
