@@ -80,24 +80,56 @@ def versions() -> dict[str, Optional[str]]:
 
 
 # -- timing -----------------------------------------------------------------------------------------------------
+OTHERS = "others_cores"  # the key, in a times dict, of each round's load from other processes (cores in use)
+QUIET_CORES = 0.25  # a round during which other processes used less than this is a quiet one
+TICK_S = 1.0 / os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 0.01
+
+
+def cpu_ticks() -> Optional[tuple[int, int]]:
+    """(busy ticks of the whole machine, steal included; ticks of this process) from /proc, None without it."""
+    try:
+        machine = Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]
+        own = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return sum(int(machine[i]) for i in (0, 1, 2, 5, 6, 7)), int(own[11]) + int(own[12])
+
+
 def interleaved(calls: Mapping[str, Callable[[], Any]], rounds: int, times: dict[str, list[float]]) -> dict[str, Any]:
-    """Run every call once per round, in turn; append each one's ms to ``times[name]``. Returns the last outputs."""
+    """Run every call once per round, in turn; append each one's ms to ``times[name]`` and the round's load from
+    other processes to ``times[OTHERS]`` (nan without /proc). Returns the last outputs."""
     outputs = {}
     for _ in range(rounds):
+        before, start = cpu_ticks(), time.perf_counter()
         for name, call in calls.items():
-            start = time.perf_counter()
+            call_start = time.perf_counter()
             outputs[name] = call()
-            times.setdefault(name, []).append(1e3 * (time.perf_counter() - start))
+            times.setdefault(name, []).append(1e3 * (time.perf_counter() - call_start))
+        after, wall_s = cpu_ticks(), time.perf_counter() - start
+        others = np.nan
+        if before is not None and after is not None:
+            others = ((after[0] - before[0]) - (after[1] - before[1])) * TICK_S / wall_s
+        times.setdefault(OTHERS, []).append(others)
     return outputs
 
 
 def timing_summary(times: dict[str, list[float]]) -> dict[str, dict]:
-    """Per method: median and p90 ms, samples, and the median over rounds of ours / method (when ours ran)."""
+    """Per method: median and p90 ms, samples, and the median over rounds of ours / method (when ours ran); the
+    same over the quiet rounds only (other processes below QUIET_CORES): a dedicated machine's figure."""
+    others = np.asarray(times.get(OTHERS, []))
     out = {}
     for name, ms in times.items():
+        if name == OTHERS:
+            continue
         row: dict[str, Any] = {"ms_median": percentile(ms, 50), "ms_p90": percentile(ms, 90), "samples": len(ms)}
+        if len(others) == len(ms):
+            quiet = others < QUIET_CORES
+            row.update(quiet_rounds=int(quiet.sum()), ms_median_quiet=percentile(list(np.asarray(ms)[quiet]), 50))
         if OURS in times and name != OURS:
-            row["ours_over"] = float(np.median(np.asarray(times[OURS]) / np.asarray(ms)))
+            ratios = np.asarray(times[OURS]) / np.asarray(ms)
+            row["ours_over"] = float(np.median(ratios))
+            if "quiet_rounds" in row:
+                row["ours_over_quiet"] = percentile(list(ratios[others < QUIET_CORES]), 50)
         out[name] = row
     return out
 
@@ -501,7 +533,7 @@ def first_calls(library: str) -> dict[str, float]:
             calls["nearest"] = partial(local_map.map.nearest, dense, 2 * voxel)
         times: dict[str, list[float]] = {}
         interleaved(calls, 1, times)
-        out.update({f"{piece}_{which}_ms": ms[0] for piece, ms in times.items()})
+        out.update({f"{piece}_{which}_ms": ms[0] for piece, ms in times.items() if piece != OTHERS})
     return out
 
 
@@ -560,16 +592,24 @@ def _f(value: Optional[float], fmt: str = ".1f") -> str:
     return "-" if value is None else format(value, fmt)
 
 
+def _ratios(name: str, row: dict) -> str:
+    """``ours / method | same, quiet rounds (their count)`` cells (1 for ours)."""
+    quiet = row.get("quiet_rounds", "-")
+    if name == OURS:
+        return f"1 | 1 ({quiet})"
+    return f"{_f(row.get('ours_over'), '.2f')} | {_f(row.get('ours_over_quiet'), '.2f')} ({quiet})"
+
+
 def speed_rows(piece: str, sequence: str, summary: dict[str, dict], extra: Callable[[str], str]) -> list[str]:
-    """Markdown rows ``| piece | sequence | method | ms | ours / method | extra |``."""
-    return [f"| {piece} | {sequence} | {name} | {_f(row['ms_median'])} | "
-            f"{_f(row.get('ours_over'), '.2f') if name != OURS else '1'} | {extra(name)} |"
+    """Markdown rows ``| piece | sequence | method | ms | ours / method | quiet | extra |``."""
+    return [f"| {piece} | {sequence} | {name} | {_f(row['ms_median'])} | {_ratios(name, row)} | {extra(name)} |"
             for name, row in summary.items()]
 
 
 def libraries_table(results: dict) -> str:
     """The measured figures as one markdown table per piece family (speed; polish accuracy; start-up)."""
-    rows = ["| piece | sequence | method | ms median | ours / method | notes |", "|---|---|---|---|---|---|"]
+    rows = ["| piece | sequence | method | ms median | ours / method | quiet rounds | notes |",
+            "|---|---|---|---|---|---|---|"]
     for seq, r in results["sequences"].items():
         down = r["downsample"]
         rows += speed_rows("downsample", seq, down["ms"],
@@ -580,14 +620,13 @@ def libraries_table(results: dict) -> str:
                            lambda n: f"agrees with ours {100 * near['agreement'][n]:.2f} %"
                            + (f", tree build {_f(near['build_ms'][n]['ms_median'])} ms" if n in near["build_ms"]
                               else ""))
-    rows += ["", "| sequence | map | start offset | method | ms median | ours / method | steps | RTE median cm "
-             "| RRE median deg | within 10 cm / 1 deg |", "|---|---|---|---|---|---|---|---|---|---|"]
+    rows += ["", "| sequence | map | start offset | method | ms median | ours / method | quiet rounds | steps "
+             "| RTE median cm | RRE median deg | within 10 cm / 1 deg |", "|---" * 11 + "|"]
     for seq, r in results["sequences"].items():
         for label, offsets in r["polish"].items():
             for offset, methods in offsets.items():
                 for name, m in methods.items():
-                    ratio = "1" if name == OURS else _f(m.get("ours_over"), ".2f")
-                    rows.append(f"| {seq} | {label} | {offset} | {name} | {_f(m['ms_median'])} | {ratio} | "
+                    rows.append(f"| {seq} | {label} | {offset} | {name} | {_f(m['ms_median'])} | {_ratios(name, m)} | "
                                 f"{_f(m['iterations_median'], '.0f')} | {_f(100 * m['rte_median_m'], '.2f')} | "
                                 f"{_f(m['rre_median_deg'], '.3f')} | {100 * m['success']:.0f} % ({m['trials']}) |")
     if results.get("startup"):

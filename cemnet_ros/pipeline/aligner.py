@@ -218,10 +218,13 @@ class ScanAligner:
         return reasons
 
     def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, estimate: Estimate) -> None:
-        """A good (or degenerate) step: the map, the fitness level and the prediction errors take it in."""
+        """A good (or degenerate) step: the map, the fitness level and the prediction errors take it in; a pose
+        chosen among near-ties moves the pose only (a map grown at a guess would mislead every later scan)."""
         assert self._map is not None  # a step is only committed against the map it was registered on
         self._pending_recovery = ""
         self._failures_in_a_row = 0
+        if estimate.tied:
+            return
         if not estimate.recovered:  # a recovery's guess was no prediction of the motion model
             self._spread.update(np.linalg.inv(T_predicted) @ pose)
         self._health.accept(estimate.signals.fitness)

@@ -3,9 +3,11 @@
 Every answer is a polished, judged :class:`~.verdict.Estimate`. Answers closer than the precision the node
 vouches for (``DISTINCT_M``, ``DISTINCT_RAD``: metres and radians, whatever the scene's size or the auto scale)
 are one answer. Distinct answers whose fitness is within ``tie_ratio`` of the best are a near-tie the scene
-cannot settle: the one next to the motion prediction is kept and flagged (a symmetric scene), and when none is
-next to it the step fails as ambiguous. A distant answer never replaces a near one of similar fitness. The
-chosen answer's ``support`` counts the starts that reached it: two independent starts that agree confirm it.
+cannot settle: the one next to the motion prediction is kept and flagged (a symmetric scene; the map does not take
+it in), and when none is next to it the step fails as ambiguous. A distant answer never replaces a near one of similar fitness. The
+chosen answer's ``support`` counts the kinds of start that reached it (the CEM's answer, the prediction, the last
+pose, the global search): two kinds that agree confirm it; the global search's hypotheses count once, since
+several of them converging to one basin is no independent evidence.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ def choose(estimates: list[Estimate], T_predicted: np.ndarray, tie_ratio: float,
     """
     ranked = sorted(estimates, key=lambda e: -e.signals.fitness)
     for estimate in ranked:
-        estimate.support = sum(not distinct(estimate.T_odom_sensor, e.T_odom_sensor) for e in ranked)
+        estimate.support = len({e.origin for e in ranked if not distinct(estimate.T_odom_sensor, e.T_odom_sensor)})
     best = ranked[0]
     ties = [best]
     for estimate in ranked[1:]:
@@ -47,6 +49,7 @@ def choose(estimates: list[Estimate], T_predicted: np.ndarray, tie_ratio: float,
     summary = f"{len(ties)} distinct answers within {tie_ratio:.2f} of the best fitness"
     if metres <= near[0] and radians <= near[1]:
         nearest.notes.append(f"symmetric scene: {summary}, the one next to the motion prediction kept")
+        nearest.tied = True
         return nearest
     best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")
     return best

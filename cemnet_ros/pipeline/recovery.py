@@ -78,14 +78,15 @@ class Recovery:
         source_units, target_units = apply_transform(to_units, source), apply_transform(to_units, target)
         hypotheses = global_search(source_units, target_units, np.zeros(6), rec.radius / frame.scale, rec.search,
                                    seed=seed, prior=self._network_prior(source_units, target_units))
-        T_local = [] if rivals else [T_guess] + ([] if T_last is None else [T_last])
-        estimates = list(rivals) + [self._judged(frame, target_map, T_guess, T_start) for T_start in T_local]
+        T_local = [] if rivals else [(T_guess, "prediction")] + ([] if T_last is None else [(T_last, "last pose")])
+        estimates = list(rivals) + [self._judged(frame, target_map, T_guess, T_start, origin)
+                                    for T_start, origin in T_local]
         for hypothesis in hypotheses:
             if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
                 break  # far behind the best: not worth a polish, nor a rival
             T_cem = from_units @ hypothesis.T_target_source @ to_units @ T_guess
             T_cem[3] = (0.0, 0.0, 0.0, 1.0)
-            estimates.append(self._judged(frame, target_map, T_guess, T_cem))
+            estimates.append(self._judged(frame, target_map, T_guess, T_cem, "search"))
         rotation, translation = self.spread.spread()
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
         chosen = choose(estimates, T_guess, rec.ambiguity_ratio, near)
@@ -95,11 +96,12 @@ class Recovery:
             chosen.failures.append(why)
         return chosen
 
-    def _judged(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, T_start: np.ndarray) -> Estimate:
+    def _judged(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, T_start: np.ndarray,
+                origin: str) -> Estimate:
         """The answer polished (widely: a start can be a metre or degrees off) from ``T_start``, judged."""
         polish = wide_polish(self.config, frame, target_map, T_start)
         return self.judge.judge(frame, target_map, T_guess, T_start, polish, 0.0, recovered=True,
-                                prediction_std=self.config.recovery.radius)
+                                prediction_std=self.config.recovery.radius, origin=origin)
 
     def _network_prior(self, source: np.ndarray, target: np.ndarray) -> Optional[SearchPrior]:
         """The network's raw mu0, sigma0 for the search's clouds in units (None: no network, or too few points)."""

@@ -76,17 +76,17 @@ class Tracker:
         starts: list[np.ndarray] = []
         estimates: list[Estimate] = []
 
-        def compete(T_start: np.ndarray) -> None:
+        def compete(T_start: np.ndarray, origin: str) -> None:
             if all(distinct(T_start, kept) for kept in starts):
                 starts.append(T_start)
                 polish = wide_polish(cfg, frame, target_map, T_start)
                 estimates.append(self.judge.judge(frame, target_map, T_predicted, T_cem, polish, spread_m,
-                                                  recovered=False, prediction_std=translation))
+                                                  recovered=False, prediction_std=translation, origin=origin))
 
-        compete(T_cem)
-        compete(T_predicted)
+        compete(T_cem, "cem")
+        compete(T_predicted, "prediction")
         if T_last is not None and not any(self._settled(e) for e in estimates):
-            compete(T_last)
+            compete(T_last, "last pose")
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
         return choose(estimates, T_predicted, cfg.tracking.tie_ratio, near), estimates
 

@@ -54,7 +54,9 @@ class Estimate:
     recovered: bool
     free_directions: np.ndarray  # (6, k) normalised directions the scene leaves unconstrained
     length: float  # the lever arm of that normalisation
-    support: int = 1  # how many of the competing starts reached this answer (:mod:`.hypotheses`)
+    origin: str = ""  # the kind of start it was polished from: cem, prediction, last pose, search
+    tied: bool = False  # chosen among distinct near-ties (:mod:`.hypotheses`): its pose is a guess among equals
+    support: int = 1  # how many kinds of the competing starts reached this answer (:mod:`.hypotheses`)
 
     def offset_from(self, T_reference: np.ndarray) -> tuple[float, float]:
         """(metres, radians) from ``T_reference`` along the constrained directions only."""
@@ -83,9 +85,11 @@ class StepJudge:
         self.health = health
 
     def judge(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, T_cem: np.ndarray,
-              polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float) -> Estimate:
+              polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float, origin: str
+              ) -> Estimate:
         """The verdict on the polished ``polish.T_target_source`` (CEM answer ``T_cem``, final CEM spread
-        ``spread_m``); ``prediction_std`` (m) is the variance kept along unconstrained directions."""
+        ``spread_m``; ``origin``: the kind of start polished); ``prediction_std`` (m) is the variance kept along
+        unconstrained directions."""
         cfg = self.config.health
         T_final = polish.T_target_source
         conditioning = Conditioning.of(polish.hessian, frame.length)
@@ -107,7 +111,7 @@ class StepJudge:
         covariance = covariance_from_hessian(conditioning, polish.residual_variance, prediction_std ** 2,
                                              cfg.min_conditioning)
         return Estimate(T_final, covariance, signals, failures, notes, recovered,
-                        conditioning.degenerate_basis(cfg.min_conditioning), conditioning.length)
+                        conditioning.degenerate_basis(cfg.min_conditioning), conditioning.length, origin)
 
     def off_map(self, frame: Frame, T_guess: np.ndarray, what: str, margin: float) -> Estimate:
         """A failure: the map has too few points within the CEM's radius (+ ``margin`` m) of the ``what`` to

@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from cemnet_ros.bench import libraries
 from cemnet_ros.bench.libraries import (
+    OTHERS,
     OURS,
     Stage,
     Step,
@@ -56,14 +57,15 @@ def _polished(local_map, step, metres=0.3, degrees=3.0):
     return relative_error(T_target_source, step.T_target_source)
 
 
-def test_interleaved_runs_the_methods_in_turn_and_ratios_are_per_round():
+def test_interleaved_runs_the_methods_in_turn_and_ratios_are_per_round_and_per_quiet_round():
     order = []
     times = {}
     out = interleaved({"ours": lambda: order.append("a") or 1, "peer": lambda: order.append("b") or 2}, 3, times)
-    assert order == ["a", "b"] * 3 and out == {"ours": 1, "peer": 2}
-    summary = timing_summary({OURS: [2.0, 4.0, 9.0], "peer": [1.0, 1.0, 3.0]})
+    assert order == ["a", "b"] * 3 and out == {"ours": 1, "peer": 2} and len(times[OTHERS]) == 3
+    summary = timing_summary({OURS: [2.0, 4.0, 9.0], "peer": [1.0, 1.0, 3.0], OTHERS: [0.0, 1.0, 0.1]})
     assert summary["peer"]["ours_over"] == pytest.approx(3.0)  # median of 2, 4, 3
-    assert summary[OURS]["ms_median"] == 4.0 and "ours_over" not in summary[OURS]
+    assert summary["peer"]["ours_over_quiet"] == pytest.approx(2.5) and summary["peer"]["quiet_rounds"] == 2
+    assert summary[OURS]["ms_median"] == 4.0 and "ours_over" not in summary[OURS] and OTHERS not in summary
 
 
 def test_perturbed_moves_by_exactly_the_offset_and_orthonormal_keeps_the_pose():
@@ -105,7 +107,7 @@ def test_ours_downsample_and_nearest_agree_with_plain_numpy_and_scipy():
     build_times = {}
     query = box_scan(2000, seed=5)
     distances = {name: call() for name, call in nearest_calls(ours.map, query, 0.3, {}, build_times).items()}
-    assert set(distances) == {OURS, "scipy"} and set(build_times) == {"scipy"}
+    assert set(distances) == {OURS, "scipy"} and set(build_times) == {"scipy", OTHERS}
     assert libraries.agreement(distances[OURS], distances["scipy"]) == 1.0
 
 
