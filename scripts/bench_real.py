@@ -15,6 +15,7 @@ the sensor period. Prints a table, writes the JSON atomically.
 
     python scripts/bench_real.py --balm ~/BALM/datas/benchmark_realworld --out results/bench_real.json
     python scripts/bench_real.py --methods cemnet --balm DIR --limit 40 --set recovery.radius=5
+    python scripts/bench_real.py --balm DIR --keyframes 2 5000   # also every 2nd scan thinned to 5000 points
 """
 from __future__ import annotations
 
@@ -47,6 +48,9 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser.add_argument("--kitti", type=Path, default=SHARED_KITTI if SHARED_KITTI.is_dir() else None,
                         help="KITTI sample folder (velodyne/, poses.txt, calib.txt)")
     parser.add_argument("--limit", type=int, help="first N scans of each sequence only")
+    parser.add_argument("--keyframes", nargs=2, type=int, metavar=("STRIDE", "POINTS"),
+                        help="also BALM as sparse keyframes: every STRIDE-th scan thinned to POINTS random points "
+                             "(a stand-in for a solid-state keyframe stream)")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="node parameters for the pipeline under test (dotted names)")
@@ -70,12 +74,12 @@ def main(argv: Optional[list[str]] = None) -> int:
         args = parse_args(argv)
         sequences = []
         if args.kitti is not None:
-            sequences.append(kitti_sequence(args.kitti))
+            kitti = kitti_sequence(args.kitti)
+            sequences.append(kitti.first(args.limit) if args.limit else kitti)
         if args.balm is not None:
             sequences.append(balm_sequence(args.balm, args.limit))
-        if args.limit:
-            for seq in sequences:
-                del seq.scans[args.limit:], seq.poses[args.limit:], seq.stamps_ns[args.limit:]
+            if args.keyframes:
+                sequences.append(sequences[-1].keyframes(*args.keyframes))
         methods = available_methods(args.methods, args.overrides)
         warm_up(methods)
         results = run_sequences(sequences, methods)

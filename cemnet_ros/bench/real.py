@@ -41,6 +41,19 @@ class Sequence:
         """The median time between scans (the sensor period a live node must keep up with)."""
         return float(np.median(np.diff(self.stamps_ns))) * 1e-9
 
+    def first(self, n: int) -> "Sequence":
+        """The first ``n`` scans."""
+        return Sequence(self.name, self.scans[:n], self.poses[:n], self.stamps_ns[:n], self.max_range)
+
+    def keyframes(self, stride: int, points: int, seed: int = 0) -> "Sequence":
+        """Every ``stride``-th scan, each thinned to ``points`` random points (seeded per scan): a sparse
+        keyframe stream with ``stride`` times the motion between scans."""
+        rng = np.random.default_rng(seed)
+        thinned = [s if len(s) <= points else s[np.sort(rng.choice(len(s), points, replace=False))]
+                   for s in self.scans[::stride]]
+        return Sequence(f"{self.name}_keyframes_{stride}x_{points}pts", thinned, self.poses[::stride],
+                        self.stamps_ns[::stride], self.max_range)
+
     @property
     def length_m(self) -> float:
         """Distance travelled along the true trajectory."""

@@ -3,11 +3,11 @@
 Every answer is a polished, judged :class:`~.verdict.Estimate`. Answers closer than the precision the node
 vouches for (``DISTINCT_M``, ``DISTINCT_RAD``: metres and radians, whatever the scene's size or the auto scale)
 are one answer. Distinct answers whose fitness is within ``tie_ratio`` of the best are a near-tie the scene
-cannot settle: the one next to the motion prediction is kept and flagged (a symmetric scene; the map does not take
-it in), and when none is next to it the step fails as ambiguous. A distant answer never replaces a near one of similar fitness. The
-chosen answer's ``support`` counts the kinds of start that reached it (the CEM's answer, the prediction, the last
-pose, the global search): two kinds that agree confirm it; the global search's hypotheses count once, since
-several of them converging to one basin is no independent evidence.
+cannot settle: the one next to the motion prediction is kept and flagged (a symmetric scene; the map does not
+take it in), and when none is next to it the step fails as ambiguous. A distant answer never replaces a near one
+of similar fitness. The chosen answer's ``support`` counts the kinds of start that reached it (the CEM's answer,
+the prediction, the last pose, the global search): two kinds that agree confirm it; the global search's
+hypotheses count once, since several of them converging to one basin is no independent evidence.
 """
 from __future__ import annotations
 
