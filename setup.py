@@ -26,6 +26,7 @@ setup(
         "numpy>=1.24",
         "scipy>=1.10",
         "numba>=0.59",
+        "small-gicp>=1.0",  # GICP: the wide stage of the polish (cemnet_ros/pipeline/basin.py)
         # The CPU wheel is pinned in requirements.txt (torch==2.13.0); an unpinned install pulls a CUDA build.
         "torch>=2.2",
         "tqdm>=4.60",
@@ -39,7 +40,7 @@ setup(
         "test": ["pytest>=7", "colcon-common-extensions", "ruff>=0.17,<0.18", "mypy>=2.4,<3"],
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         "open3d": ["open3d-cpu>=0.18"],
-        "bench": ["kiss-icp", "small-gicp", "evo"],
+        "bench": ["kiss-icp", "evo"],
     },
     zip_safe=True,
     maintainer="cemnet_ros maintainers",

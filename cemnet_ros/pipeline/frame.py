@@ -7,11 +7,12 @@ scan must not fix the units of the trajectory.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
+from cemnet_ros.pipeline.basin import GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig
 from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
@@ -34,6 +35,14 @@ class Frame:
     near: np.ndarray  # the voxel points within the CEM's radius (the global search draws from them)
     scale: float  # metres per network unit this frame was prepared with
     voxel: float  # its voxel size (m); 0 = no voxel grid
+    _gicp: dict[float, GicpCloud] = field(default_factory=dict, repr=False, compare=False)
+
+    def gicp_cloud(self, voxel: float) -> GicpCloud:
+        """The voxel cloud thinned to ``voxel`` with covariances, for the polish's wide stage (:mod:`.basin`);
+        made once per voxel size."""
+        if voxel not in self._gicp:
+            self._gicp[voxel] = gicp_cloud(self.dense, voxel)
+        return self._gicp[voxel]
 
     @property
     def length(self) -> float:

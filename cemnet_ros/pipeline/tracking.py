@@ -14,6 +14,7 @@ import numpy as np
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.basin import gicp
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.frame import Frame
 from cemnet_ros.pipeline.hypotheses import choose, distinct
@@ -22,7 +23,6 @@ from cemnet_ros.pipeline.verdict import Estimate, StepJudge
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 PREDICTION_SPREADS = 3.0  # an answer further than this many tracking spreads is not explained by the prediction
-WIDE_POINTS = 1000  # polish points of the wide pairing stage (the fine stage uses all): it only finds the basin
 
 
 def map_sample(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, n: int,
@@ -33,13 +33,15 @@ def map_sample(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_gues
 
 
 def wide_polish(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_start: np.ndarray) -> PolishResult:
-    """A polish from an answer that may be a metre or degrees off: wide pairing on a subset first (it finds the
-    basin), then the fine pairing on every polish point (it brings the precision)."""
+    """A polish from an answer that may be a metre or degrees off: GICP against the map's last scan first (it
+    finds the basin, :mod:`.basin`), then the point-to-plane pairing on every polish point against the map (it
+    brings the precision)."""
     rec, voxel = config.recovery, frame.polish_voxel
-    # Every k-th point: the polish points are in scan order, so a stride spans the whole scan (a prefix is a wedge).
-    subset = frame.polish[::max(1, len(frame.polish) // WIDE_POINTS)]
-    coarse = point_to_plane_icp(target_map, subset, T_start, rec.polish_distance * voxel, rec.polish_iters)
-    return point_to_plane_icp(target_map, frame.polish, coarse.T_target_source, 2.0 * voxel, config.polish.iters)
+    T_basin = T_start
+    if target_map.last_scan is not None:
+        T_basin = gicp(target_map.last_scan, frame.gicp_cloud(target_map.voxel_size), T_start,
+                       rec.polish_distance * voxel, rec.polish_iters)
+    return point_to_plane_icp(target_map, frame.polish, T_basin, 2.0 * voxel, config.polish.iters)
 
 
 class Tracker:

@@ -4,7 +4,8 @@ In the spirit of KISS-ICP's VoxelHashMap: space is cut into voxels of ``voxel_si
 ``max_points_per_voxel`` points that fall into it (later points of a full voxel are dropped, so the map does not
 grow where the sensor stays), and voxels farther than ``max_distance`` from the sensor are forgotten. Every point
 carries a unit normal and a planarity weight in [0, 1], estimated once when it is inserted, from the map points
-around it, for the point-to-plane ICP of :mod:`cemnet_ros.pipeline.refine`.
+around it, for the point-to-plane ICP of :mod:`cemnet_ros.pipeline.refine`. The last scan inserted is also kept
+thinned to the voxel with covariances: the target of the polish's wide stage (:mod:`.basin`).
 
 The storage and its kernels are :mod:`.voxel_hash` (hash table, insertion, pruning), the normals
 :mod:`.voxel_normals`, the queries :mod:`.voxel_query`; the numba policy (cached on disk, made ready at start by
@@ -18,6 +19,7 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
+from cemnet_ros.pipeline.basin import GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.voxel_hash import EMPTY, insert_points, prune_far_voxels, rehash
 from cemnet_ros.pipeline.voxel_normals import NORMAL_RADIUS, estimate_normals
 from cemnet_ros.pipeline.voxel_query import nearest_batch, slots_within
@@ -48,6 +50,7 @@ class VoxelMap:
         self._allocate_voxels(1024)
         self._allocate_table(4096)
         self._dense: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = None
+        self.last_scan: Optional[GicpCloud] = None  # the last points inserted, thinned to the voxel (:mod:`.basin`)
 
     def __len__(self) -> int:
         return self._n_points
@@ -99,6 +102,7 @@ class VoxelMap:
                                           self._table, self._shift)
         self._n_points = int(self._counts[:self._n_voxels].sum())
         self._dense = None
+        self.last_scan = gicp_cloud(points, self.voxel_size)
 
     def nearest(self, query: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray]:
         """(n,) distances (inf if none within ``max_distance``) and (n,) indices into :attr:`points` (-1)."""

@@ -1,0 +1,49 @@
+"""The wide stage of the polish: GICP (small_gicp) of a scan against the last scan its map took in, metres.
+
+A start can be a metre or tens of degrees off (a fast turn, a recovery's hypothesis). GICP pairs each point's
+local distribution with its neighbour's and finds the basin from much farther than a point-to-plane ICP on the
+same points (docs/libraries.md has the figures); the point-to-plane polish against the whole map then brings the
+precision and the Hessian (:mod:`.refine`). Both clouds are thinned to the map's voxel.
+
+Single-threaded on purpose: small_gicp splits its parallel sums dynamically, so their rounding, and with it the
+trajectory, would change with the machine's load.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import small_gicp
+
+THREADS = 1  # deterministic sums (see above)
+NEIGHBOURS = 10  # points of each local distribution (small_gicp's default)
+
+
+@dataclass
+class GicpCloud:
+    """A cloud thinned to a voxel, with its points' covariances and its KD-tree (small_gicp's types)."""
+
+    points: small_gicp.PointCloud
+    tree: small_gicp.KdTree
+
+    def __len__(self) -> int:
+        return int(self.points.size())
+
+
+def gicp_cloud(points: np.ndarray, voxel: float) -> GicpCloud:
+    """``points`` (n, 3) thinned to ``voxel`` (m), with covariances from their ``NEIGHBOURS`` nearest."""
+    cloud, tree = small_gicp.preprocess_points(np.ascontiguousarray(points, dtype=np.float64), float(voxel),
+                                               num_neighbors=NEIGHBOURS, num_threads=THREADS)
+    return GicpCloud(cloud, tree)
+
+
+def gicp(target: GicpCloud, source: GicpCloud, T_target_source: np.ndarray, max_distance: float,
+         iters: int) -> np.ndarray:
+    """GICP from ``T_target_source`` (4x4) with pairs up to ``max_distance`` (m), at most ``iters`` steps (the
+    start itself if it found no answer)."""
+    result = small_gicp.align(target.points, source.points, target.tree,
+                              init_T_target_source=np.asarray(T_target_source, dtype=np.float64),
+                              registration_type="GICP", max_correspondence_distance=float(max_distance),
+                              num_threads=THREADS, max_iterations=int(iters))
+    T_found = np.asarray(result.T_target_source, dtype=np.float64)
+    return T_found if np.all(np.isfinite(T_found)) else np.asarray(T_target_source, dtype=np.float64).copy()
