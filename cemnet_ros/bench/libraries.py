@@ -9,8 +9,10 @@ registration); scipy's ``cKDTree`` (a core dependency) for the nearest points.
 Every method gets the node's parameters (frame voxel, map voxel and points per voxel, the polish's stages:
 points, pairing distance, iteration cap) and :data:`THREADS` threads. Times are interleaved: a round runs every
 method once in turn (A, B, C, A, B, C, ...), so that other load on the machine falls on all of them alike; the
-ratio ours / method is taken per round and summarised by its median. ``scripts/bench_libraries.py`` runs it,
-``docs/libraries.md`` reads it.
+ratio ours / method is taken per round and summarised by its median, also over the quiet rounds alone (other
+processes below QUIET_CORES). Run it under the node's thread policy (``import cemnet_ros.ros`` before numpy, as
+``scripts/bench_libraries.py`` does): numba's and small_gicp's OpenMP pools share the process, and spinning idle
+threads slowed every method several times over on 2 cores. ``docs/libraries.md`` reads the figures.
 """
 from __future__ import annotations
 
@@ -41,13 +43,13 @@ from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.frame import Frame, Preprocessor, cropped
 from cemnet_ros.pipeline.preprocess import voxel_downsample
 from cemnet_ros.pipeline.refine import point_to_plane_icp
-from cemnet_ros.pipeline.tracking import WIDE_POINTS
 from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 THREADS = 2  # every method's thread count (numba's, small_gicp's num_threads, KISS-ICP's max_num_threads)
 OURS = "ours"
 NEIGHBOURS = 20  # small_gicp's default k for its normals and covariances
 CONVERGENCE = 1e-4  # a step smaller than this (rad and m) ends a polish: point_to_plane_icp's default
+WIDE_POINTS = 1000  # polish points of the wide stage (tracking.WIDE_POINTS up to commit 1dddb83)
 FINE_DISTANCE_VOXELS = 2.0  # the fine stage's pairing distance, frame voxels (as tracking.wide_polish)
 OFFSETS = ((0.3, 3.0), (1.0, 10.0))  # start offsets from the true pose (m, deg), random directions
 PEER_MODULES = {"small_gicp": ("small_gicp",),
@@ -145,13 +147,14 @@ class Stage:
 
     def subset(self, polish: np.ndarray) -> np.ndarray:
         """Every k-th polish point, about ``points`` of them: the polish points are in scan order, so a stride
-        spans the whole scan (as ``tracking.wide_polish``; a prefix would be a wedge)."""
+        spans the whole scan (as ``tracking.wide_polish`` did up to 1dddb83; a prefix would be a wedge)."""
         return polish[::max(1, len(polish) // self.points)]
 
 
 def polish_stages(config: AlignerConfig, voxel: float) -> list[Stage]:
-    """The node's polish from a start that may be a metre or degrees off (``tracking.wide_polish``): a wide
-    pairing on a subset finds the basin, the fine pairing on every polish point brings the precision."""
+    """The node's point-to-plane polish from a start that may be a metre or degrees off (``tracking.wide_polish``
+    up to commit 1dddb83; since then its wide stage is small_gicp's GICP): a wide pairing on a subset finds the
+    basin, the fine pairing on every polish point brings the precision."""
     return [Stage(WIDE_POINTS, config.recovery.polish_distance * voxel, config.recovery.polish_iters),
             Stage(config.polish.points, FINE_DISTANCE_VOXELS * voxel, config.polish.iters)]
 
@@ -409,8 +412,8 @@ def bench_downsample(sequence: Sequence, frames: list[Frame], config: AlignerCon
         outputs = interleaved(downsample_calls(scan, frames[0].voxel, peers), rounds, times)
         for name, out in outputs.items():
             kept.setdefault(name, []).append(len(out))
-    points = {name: int(np.mean(n)) for name, n in kept.items()}
-    return {"ms": timing_summary(times), "points_in": points.pop("in"), "points_out": points}
+    counts = {name: int(np.mean(n)) for name, n in kept.items()}
+    return {"ms": timing_summary(times), "points_in": counts.pop("in"), "points_out": counts}
 
 
 def bench_map_update(frames: list[Frame], poses: list[np.ndarray], config: AlignerConfig,
@@ -517,7 +520,7 @@ FIRST_CALL_MAP = {OURS: OURS, "small_gicp": "small_gicp plane", "kiss_icp": "kis
 def first_calls(library: str) -> dict[str, float]:
     """ms of each piece of ``library`` on a synthetic 30k-point scan, in two passes on fresh objects: the first
     pass includes numba's compilation or cache load for ours (run it in a fresh process: :func:`startup_run`)."""
-    peers = import_peers(tuple(name for name in PEER_MODULES if name == library))
+    peers = {} if library == OURS else import_peers((library,))
     scan, voxel = box_scan(30_000), 0.2
     dense = scan[::3]  # not voxel_downsample's: its first call is one of those timed
     step = Step(1, [dense], [np.eye(4)], dense, dense[:3000],
@@ -539,7 +542,7 @@ def first_calls(library: str) -> dict[str, float]:
 
 def _probe(library: str, modules: tuple[str, ...]) -> dict[str, float]:
     """In a fresh process: ms to import ``modules`` (numpy already loaded: every method needs it), then
-    :func:`first_calls`."""
+    :func:`first_calls`. Its source runs on its own in the child, hence its own imports."""
     import importlib
     import time
 
@@ -565,7 +568,9 @@ def startup_run(library: str, cache_dir: Optional[str] = None) -> dict[str, floa
     repo = Path(__file__).resolve().parents[2]
     env["PYTHONPATH"] = os.pathsep.join([str(repo)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     done = subprocess.run([sys.executable, "-c", code, library, *IMPORTS[library]], env=env, capture_output=True,
-                          text=True, check=True)
+                          text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"the start-up probe of {library} failed: {done.stderr.strip()[-2000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -582,7 +587,7 @@ def startup(libraries: list[str], runs: int, cold: bool) -> dict:
                            for library, runs_ in samples.items()}
     if cold and OURS in libraries:
         with tempfile.TemporaryDirectory(prefix="numba-cold-") as empty:
-            log("start-up: ours with an empty numba cache (compiles every kernel, ~1 min)")
+            log("start-up: ours with an empty numba cache (compiles these pieces' kernels)")
             out["ours, empty numba cache"] = startup_run(OURS, empty)
     return out
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -32,6 +32,7 @@ from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform, se3_log
 from cemnet_ros.pipeline import preprocess, refine
 from cemnet_ros.pipeline.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.basin import GicpCloud
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.covariance import flat_covariance
 from cemnet_ros.pipeline.frame import Frame, Preprocessor
@@ -177,7 +178,8 @@ class ScanAligner:
     def _restart_map(self, frame: Frame, T_odom_sensor: np.ndarray) -> None:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
         self._map = self._preprocessor.new_map()
-        self._map.update(apply_transform(T_odom_sensor, frame.dense), T_odom_sensor[:3, 3])
+        self._map.update(apply_transform(T_odom_sensor, frame.dense), T_odom_sensor[:3, 3],
+                         self._scan_cloud(frame, self._map.voxel_size, T_odom_sensor))
         self._T_odom_last_insert = T_odom_sensor.copy()
         self._sweep.map_restarted(T_odom_sensor)
         self._health.reset()
@@ -228,9 +230,16 @@ class ScanAligner:
         if not estimate.recovered:  # a recovery's guess was no prediction of the motion model
             self._spread.update(np.linalg.inv(T_predicted) @ pose)
         self._health.accept(estimate.signals.fitness)
-        self._map.update(apply_transform(pose, frame.dense), pose[:3, 3])
+        self._map.update(apply_transform(pose, frame.dense), pose[:3, 3],
+                         self._scan_cloud(frame, self._map.voxel_size, pose))
         self._T_odom_last_insert = pose.copy()
         self._sweep.inserted(pose)
+
+    @staticmethod
+    def _scan_cloud(frame: Frame, voxel: float, T_odom_sensor: np.ndarray) -> Callable[[], GicpCloud]:
+        """What makes the frame's GICP cloud placed at its pose, for the map to keep as its last scan."""
+        pose = T_odom_sensor.copy()
+        return lambda: frame.gicp_cloud(voxel).placed(pose)
 
     def _velocity(self) -> Optional[np.ndarray]:
         """The motion model's twist (6,) per second: its last motion over its last time step (None: none yet)."""

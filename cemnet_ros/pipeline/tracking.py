@@ -32,16 +32,19 @@ def map_sample(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_gues
     return target_map.sample(n, T_guess[:3, 3], radius, seed=max(config.registration.seed, 0))
 
 
+def fine_polish(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_start: np.ndarray) -> PolishResult:
+    """The point-to-plane polish of every polish point against the map, pairs within two voxels: the precision."""
+    return point_to_plane_icp(target_map, frame.polish, T_start, 2.0 * frame.polish_voxel, config.polish.iters)
+
+
 def wide_polish(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_start: np.ndarray) -> PolishResult:
     """A polish from an answer that may be a metre or degrees off: GICP against the map's last scan first (it
-    finds the basin, :mod:`.basin`), then the point-to-plane pairing on every polish point against the map (it
-    brings the precision)."""
-    rec, voxel = config.recovery, frame.polish_voxel
+    finds the basin, :mod:`.basin`), then :func:`fine_polish`."""
     T_basin = T_start
     if target_map.last_scan is not None:
         T_basin = gicp(target_map.last_scan, frame.gicp_cloud(target_map.voxel_size), T_start,
-                       rec.polish_distance * voxel, rec.polish_iters)
-    return point_to_plane_icp(target_map, frame.polish, T_basin, 2.0 * voxel, config.polish.iters)
+                       config.recovery.polish_distance * frame.polish_voxel, config.recovery.polish_iters)
+    return fine_polish(config, frame, target_map, T_basin)
 
 
 class Tracker:
@@ -58,11 +61,12 @@ class Tracker:
         """The registration of ``frame`` near ``T_predicted`` (``T_last``: the last pose; ``dt_ratio``: this time
         step over the usual one, which widens the spread).
 
-        Answers compete (:mod:`.hypotheses`): the CEM's around the prediction and the prediction itself, and,
-        unless one of them fits as well as the recent steps did, the last pose (a stop, a jerk: the sensor did
-        not move as it did). Each start distinct from those before it is polished against the map and judged;
-        the fittest wins, near-ties go to the nearest (a direction the scene hardly constrains stays at the
-        prediction). Returns the chosen answer and all of them (the recovery's rivals).
+        The CEM's answer, finely polished, stands when it fits as well as the recent steps did (the usual
+        step, :meth:`_settled`). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction,
+        each polished from afar, and, unless one of them stands on its own, the last pose (a stop, a jerk: the
+        sensor did not move as it did). The fittest wins, near-ties go to the nearest (a direction the scene
+        hardly constrains stays at the prediction). Returns the chosen answer and all of them (the recovery's
+        rivals).
         """
         cfg = self.config
         target = map_sample(cfg, frame, target_map, T_predicted, cfg.registration.n_points)
@@ -75,6 +79,10 @@ class Tracker:
                  else np.r_[np.full(3, rotation), np.full(3, translation / frame.scale)])
         centre = {"motion": T_predicted, "identity": T_last, "network": None}[cfg.tracking.prior]
         T_cem, spread_m = self._cem(frame, clouds, to_units, from_units, centre, sigma)
+        usual = self.judge.judge(frame, target_map, T_predicted, T_cem, fine_polish(cfg, frame, target_map, T_cem),
+                                 spread_m, recovered=False, prediction_std=translation, origin="cem")
+        if self._settled(usual):
+            return usual, [usual]
         starts: list[np.ndarray] = []
         estimates: list[Estimate] = []
 
@@ -101,9 +109,11 @@ class Tracker:
         return [why] if why else []
 
     def _settled(self, estimate: Estimate) -> bool:
-        """An answer that fits as well as the recent good steps did (their running fitness level)."""
-        level = self.judge.health.level
-        return not estimate.failures and level is not None and estimate.signals.fitness >= level
+        """An answer that stands on its own: no failure, and it fits as well as the recent good steps did (at
+        ``health.confirm_ratio`` x their running level: what one start alone must reach)."""
+        health = self.judge.health
+        return (not estimate.failures and health.level is not None
+                and not health.unconfirmed(estimate.signals.fitness, support=1))
 
     def _cem(self, frame: Frame, clouds: tuple[np.ndarray, np.ndarray], to_units: np.ndarray,
              from_units: np.ndarray, T_centre: Optional[np.ndarray], sigma: np.ndarray) -> tuple[np.ndarray, float]:

@@ -13,7 +13,7 @@ The storage and its kernels are :mod:`.voxel_hash` (hash table, insertion, pruni
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import numba
 import numpy as np
@@ -50,13 +50,21 @@ class VoxelMap:
         self._allocate_voxels(1024)
         self._allocate_table(4096)
         self._dense: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = None
-        self.last_scan: Optional[GicpCloud] = None  # the last points inserted, thinned to the voxel (:mod:`.basin`)
+        self._last_scan: Optional[GicpCloud] = None
+        self._make_last_scan: Optional[Callable[[], GicpCloud]] = None
 
     def __len__(self) -> int:
         return self._n_points
 
     def empty(self) -> bool:
         return self._n_points == 0
+
+    @property
+    def last_scan(self) -> Optional[GicpCloud]:
+        """The last points inserted, thinned to the voxel, with covariances (:mod:`.basin`); None when empty."""
+        if self._last_scan is None and self._make_last_scan is not None:
+            self._last_scan = self._make_last_scan()
+        return self._last_scan
 
     @property
     def points(self) -> np.ndarray:
@@ -81,8 +89,12 @@ class VoxelMap:
         """(points, normals, planarity) indexed by the slots that :func:`nearest_slot` returns."""
         return self._pts, self._normals, self._planarity
 
-    def update(self, points: np.ndarray, sensor_position: np.ndarray) -> None:
-        """Insert ``points`` (map frame) into voxels with room, estimate their normals, drop far voxels."""
+    def update(self, points: np.ndarray, sensor_position: np.ndarray,
+               scan: Optional[Callable[[], GicpCloud]] = None) -> None:
+        """Insert ``points`` (map frame) into voxels with room, estimate their normals, drop far voxels.
+
+        ``scan``: makes the same points as a :class:`~.basin.GicpCloud` thinned to the map's voxel, placed where
+        they were inserted (:attr:`last_scan`, made when first asked for; from ``points`` when not given)."""
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         self._reserve(len(points))
         m = self.max_points_per_voxel
@@ -102,7 +114,8 @@ class VoxelMap:
                                           self._table, self._shift)
         self._n_points = int(self._counts[:self._n_voxels].sum())
         self._dense = None
-        self.last_scan = gicp_cloud(points, self.voxel_size)
+        self._last_scan = None
+        self._make_last_scan = scan or (lambda: gicp_cloud(points, self.voxel_size))
 
     def nearest(self, query: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray]:
         """(n,) distances (inf if none within ``max_distance``) and (n,) indices into :attr:`points` (-1)."""
