@@ -62,8 +62,8 @@ class Tracker:
         step over the usual one, which widens the spread).
 
         The CEM's answer, finely polished, stands when it fits as well as the recent steps did (the usual
-        step, :meth:`_settled`). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction,
-        each polished from afar, and, unless one of them stands on its own, the last pose (a stop, a jerk: the
+        step). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished from
+        afar, and, unless one of them stands on its own, the last pose (a stop, a jerk: the
         sensor did not move as it did). The fittest wins, near-ties go to the nearest (a direction the scene
         hardly constrains stays at the prediction). Returns the chosen answer and all of them (the recovery's
         rivals).
@@ -81,7 +81,7 @@ class Tracker:
         T_cem, spread_m = self._cem(frame, clouds, to_units, from_units, centre, sigma)
         usual = self.judge.judge(frame, target_map, T_predicted, T_cem, fine_polish(cfg, frame, target_map, T_cem),
                                  spread_m, recovered=False, prediction_std=translation, origin="cem")
-        if self._settled(usual):
+        if self._as_usual(usual):
             return usual, [usual]
         starts: list[np.ndarray] = []
         estimates: list[Estimate] = []
@@ -95,7 +95,7 @@ class Tracker:
 
         compete(T_cem, "cem")
         compete(T_predicted, "prediction")
-        if T_last is not None and not any(self._settled(e) for e in estimates):
+        if T_last is not None and not any(self._stands_alone(e) for e in estimates):
             compete(T_last, "last pose")
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
         return choose(estimates, T_predicted, cfg.tracking.tie_ratio, near), estimates
@@ -108,9 +108,13 @@ class Tracker:
         why = self.judge.health.unconfirmed(estimate.signals.fitness, estimate.support, after_gap)
         return [why] if why else []
 
-    def _settled(self, estimate: Estimate) -> bool:
-        """An answer that stands on its own: no failure, and it fits as well as the recent good steps did (at
-        ``health.confirm_ratio`` x their running level: what one start alone must reach)."""
+    def _as_usual(self, estimate: Estimate) -> bool:
+        """No failure, and a fit at least the running level of the recent good steps: the usual step."""
+        level = self.judge.health.level
+        return not estimate.failures and level is not None and estimate.signals.fitness >= level
+
+    def _stands_alone(self, estimate: Estimate) -> bool:
+        """No failure, and confirmed without a second start (at ``health.confirm_ratio`` x the running level)."""
         health = self.judge.health
         return (not estimate.failures and health.level is not None
                 and not health.unconfirmed(estimate.signals.fitness, support=1))

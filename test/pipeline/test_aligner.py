@@ -258,3 +258,27 @@ def test_a_prediction_off_the_map_is_searched_where_the_map_grew_never_an_except
     step = aligner.process(street_scan(WORLD, truth, rng), 3 * PERIOD + 5 * 10 ** 9)
     assert step.recovered and step.accepted, step.reason
     assert within(*relative_error(step.pose, np.linalg.inv(first) @ truth), 0.05, 0.2)
+
+
+def test_a_replay_gives_the_same_trajectory_every_time_and_with_any_thread_count():
+    """No time budget, fixed partial sums, single-threaded GICP: what a scan yields does not depend on the machine's
+    speed or load (with a global search, the wide stage and the fine polish on the way)."""
+    import numba
+    import torch
+
+    poses = [make_transform(yaw=np.radians(12.0 * k), t=(0.6 * k, 0.1 * k, 0.0)) for k in range(5)]
+    poses.append(make_transform(yaw=np.radians(80.0), t=(5.0, 3.0, 0.0)))  # a kidnap: the global search runs
+
+    def trajectory():
+        return np.array([s.pose for s in drive(ScanAligner(FAST), poses)])
+
+    first = trajectory()
+    np.testing.assert_array_equal(trajectory(), first)
+    threads = numba.get_num_threads(), torch.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        torch.set_num_threads(1)
+        np.testing.assert_array_equal(trajectory(), first)
+    finally:
+        numba.set_num_threads(threads[0])
+        torch.set_num_threads(threads[1])
