@@ -49,7 +49,7 @@ THREADS = 2  # every method's thread count (numba's, small_gicp's num_threads, K
 OURS = "ours"
 NEIGHBOURS = 20  # small_gicp's default k for its normals and covariances
 CONVERGENCE = 1e-4  # a step smaller than this (rad and m) ends a polish: point_to_plane_icp's default
-WIDE_POINTS = 1000  # polish points of the wide stage (tracking.WIDE_POINTS up to commit 1dddb83)
+WIDE_POINTS = 1000  # polish points of the timed schedule's wide stage
 FINE_DISTANCE_VOXELS = 2.0  # the fine stage's pairing distance, frame voxels (as tracking.wide_polish)
 OFFSETS = ((0.3, 3.0), (1.0, 10.0))  # start offsets from the true pose (m, deg), random directions
 PEER_MODULES = {"small_gicp": ("small_gicp",),
@@ -147,14 +147,14 @@ class Stage:
 
     def subset(self, polish: np.ndarray) -> np.ndarray:
         """Every k-th polish point, about ``points`` of them: the polish points are in scan order, so a stride
-        spans the whole scan (as ``tracking.wide_polish`` did up to 1dddb83; a prefix would be a wedge)."""
+        spans the whole scan (a prefix would be a wedge)."""
         return polish[::max(1, len(polish) // self.points)]
 
 
 def polish_stages(config: AlignerConfig, voxel: float) -> list[Stage]:
-    """The node's point-to-plane polish from a start that may be a metre or degrees off (``tracking.wide_polish``
-    up to commit 1dddb83; since then its wide stage is small_gicp's GICP): a wide pairing on a subset finds the
-    basin, the fine pairing on every polish point brings the precision."""
+    """A two-stage point-to-plane polish from a start that may be a metre or degrees off, the schedule compared
+    with the libraries' ICPs: a wide pairing on a subset finds the basin, the fine pairing on every polish point
+    brings the precision (the node's own wide stage is small_gicp's GICP, :mod:`cemnet_ros.pipeline.basin`)."""
     return [Stage(WIDE_POINTS, config.recovery.polish_distance * voxel, config.recovery.polish_iters),
             Stage(config.polish.points, FINE_DISTANCE_VOXELS * voxel, config.polish.iters)]
 
