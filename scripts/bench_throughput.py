@@ -147,7 +147,7 @@ def cemnet_process():
 def icp_process(voxel: float, scale: float):
     """Plain sequential point-to-point ICP odometry on the pipeline's voxel grid (scipy k-d tree, identity init)."""
     from cemnet_ros.eval.baselines import ICPConfig, icp
-    from cemnet_ros.pipeline.preprocess import voxel_downsample
+    from cemnet_ros.pipeline.steps.preprocess import voxel_downsample
 
     state = {"prev": None}
     config = ICPConfig(max_iterations=30, max_distance=3.0 * (voxel if voxel > 0 else scale / 100.0))

@@ -1,4 +1,4 @@
-"""The package's one numba policy: every kernel (``core``, ``pipeline.preprocess``, ``refine``, ``voxel_*``) uses
+"""The package's one numba policy: every kernel (``core``, ``pipeline.steps.preprocess``, ``refine``, ``voxel_*``) uses
 :func:`kernel`.
 
 - **nogil**: every kernel releases the GIL, so that the ROS executor thread keeps receiving messages while a

@@ -85,7 +85,7 @@ def aligned_points(points_sensor: np.ndarray, T_odom_sensor: np.ndarray, voxel: 
     points_odom = apply_transform(T_odom_sensor, points_sensor)
     if voxel <= 0:
         return points_odom
-    from cemnet_ros.pipeline.preprocess import voxel_downsample  # numba: not at the node's start-up
+    from cemnet_ros.pipeline.steps.preprocess import voxel_downsample  # numba: not at the node's start-up
 
     return voxel_downsample(points_odom, voxel)
 

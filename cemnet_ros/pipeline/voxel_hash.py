@@ -20,7 +20,7 @@ GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: multiply, keep the 
 # -- hash table -------------------------------------------------------------------------------------------------
 @kernel
 def cell_index(x, voxel_size):
-    """Voxel index of a coordinate (the same floor as :func:`cemnet_ros.pipeline.preprocess.voxel_downsample`)."""
+    """Voxel index of a coordinate (the same floor as :func:`cemnet_ros.pipeline.steps.preprocess.voxel_downsample`)."""
     return np.int64(np.floor(x / voxel_size))
 
 

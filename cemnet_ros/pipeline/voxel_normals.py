@@ -1,7 +1,7 @@
 """Normals of the local map's points (numba): PCA of the map points around each new point, voxel by voxel.
 
 Every point gets a unit normal and a planarity weight in [0, 1] once, when it is inserted, for the
-point-to-plane ICP of :mod:`cemnet_ros.pipeline.refine`. The storage layout is :mod:`.voxel_hash`'s.
+point-to-plane ICP of :mod:`cemnet_ros.pipeline.steps.refine`. The storage layout is :mod:`.voxel_hash`'s.
 """
 from __future__ import annotations
 

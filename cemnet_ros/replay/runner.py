@@ -19,8 +19,8 @@ import numpy as np
 from tqdm import tqdm
 
 from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
-from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.odometry_output import OdometryOutput, aligned_points, odometry_output, tf_parent_child
+from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.replay.bag_io import (
     ODOMETRY,
     POINTCLOUD2,

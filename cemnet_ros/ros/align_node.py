@@ -29,10 +29,10 @@ from sensor_msgs.msg import PointCloud2
 
 from cemnet_ros.pipeline.aligner_session import AlignerSession, StepResult
 from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy, transform_msg_to_matrix
-from cemnet_ros.pipeline.input_checks import ScanRejected
 from cemnet_ros.pipeline.node_status import NodeStatus
 from cemnet_ros.pipeline.pairing import PairMatcher
 from cemnet_ros.pipeline.scan_status import Outcome, ScanStatus
+from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.pipeline.worker import BoundedWorker
 from cemnet_ros.ros.outputs import NodeOutputs
 from cemnet_ros.ros.parameters import ConfigError, declare_and_read
