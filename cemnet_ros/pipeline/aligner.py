@@ -31,6 +31,7 @@ import numpy as np
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform, se3_log
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.pair_mode import PairMode
 from cemnet_ros.pipeline.steps import preprocess, refine
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
@@ -44,7 +45,6 @@ from cemnet_ros.pipeline.steps.recovery import Recovery, prior_registrar
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
 from cemnet_ros.pipeline.steps.tracking import Tracker
 from cemnet_ros.pipeline.steps.verdict import AlignmentStep, Estimate, StepJudge
-from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 
 class ScanAligner:

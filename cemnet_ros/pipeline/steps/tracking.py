@@ -14,13 +14,13 @@ import numpy as np
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.basin import gicp
 from cemnet_ros.pipeline.steps.frame import Frame
 from cemnet_ros.pipeline.steps.hypotheses import choose, distinct
 from cemnet_ros.pipeline.steps.refine import PolishResult, point_to_plane_icp
 from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
-from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 PREDICTION_SPREADS = 3.0  # an answer further than this many tracking spreads is not explained by the prediction
 

@@ -12,6 +12,7 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.covariance import (
     Conditioning,
     covariance_from_hessian,
@@ -21,7 +22,6 @@ from cemnet_ros.pipeline.steps.covariance import (
 from cemnet_ros.pipeline.steps.frame import Frame
 from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals, disagreement
 from cemnet_ros.pipeline.steps.refine import PolishResult
-from cemnet_ros.pipeline.voxel_map import VoxelMap
 
 LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
 MIN_POLISH_PAIRS = 10  # a polish with fewer point-to-plane pairs constrains nothing

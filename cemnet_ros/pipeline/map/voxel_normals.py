@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.jit import FASTMATH_INF_SAFE, kernel
-from cemnet_ros.pipeline.voxel_hash import find, pack, unpack
+from cemnet_ros.pipeline.map.voxel_hash import find, pack, unpack
 
 MIN_NEIGHBOURS = 5  # fewer map points around a new point leave its normal undefined (planarity 0)
 NORMAL_RADIUS = 1.0  # neighbourhood of the normal estimation, in voxels
