@@ -58,8 +58,8 @@ def child(cached: bool, reps: int, passes: int) -> dict:
     from cemnet_ros.core.geometry import euler_to_matrix_np
     from cemnet_ros.core.lattice import build_lattice
     from cemnet_ros.data.shapes import bracket_shape
-    from cemnet_ros.pipeline import preprocess, refine
     from cemnet_ros.pipeline.aligner import ScanAligner
+    from cemnet_ros.pipeline.steps import preprocess, refine
     from cemnet_ros.replay.bag_io import BagReader
 
     lattice_rewards.compile_kernels()

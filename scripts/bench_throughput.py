@@ -32,7 +32,7 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 from cemnet_ros.bench.speed import ping_pong_cycle  # noqa: E402
 from cemnet_ros.data.kitti import kitti_scans  # noqa: E402
 from cemnet_ros.data.shared import SHARED  # noqa: E402
-from cemnet_ros.pipeline.worker import BoundedWorker  # noqa: E402
+from cemnet_ros.pipeline.node.worker import BoundedWorker  # noqa: E402
 from cemnet_ros.ros.node_config import NodeConfig  # noqa: E402
 
 KITTI = SHARED / "data" / "kitti_sample"
@@ -147,7 +147,7 @@ def cemnet_process():
 def icp_process(voxel: float, scale: float):
     """Plain sequential point-to-point ICP odometry on the pipeline's voxel grid (scipy k-d tree, identity init)."""
     from cemnet_ros.eval.baselines import ICPConfig, icp
-    from cemnet_ros.pipeline.preprocess import voxel_downsample
+    from cemnet_ros.pipeline.steps.preprocess import voxel_downsample
 
     state = {"prev": None}
     config = ICPConfig(max_iterations=30, max_distance=3.0 * (voxel if voxel > 0 else scale / 100.0))

@@ -14,7 +14,7 @@ def compiled_kernels(request):
     first: each test's time and timeouts stay its own. Skipped when no selected test needs them."""
     if any(Path(item.path).parent.name in KERNEL_FOLDERS for item in request.session.items):
         from cemnet_ros.core import lattice_rewards
-        from cemnet_ros.pipeline import preprocess, refine
+        from cemnet_ros.pipeline.steps import preprocess, refine
 
         lattice_rewards.compile_kernels()
         preprocess.compile_kernels()

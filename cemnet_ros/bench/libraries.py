@@ -40,10 +40,10 @@ from cemnet_ros.bench.real import OFF_DEG, OFF_M, Sequence
 from cemnet_ros.core.geometry import apply_transform, rigid_transform, so3_exp
 from cemnet_ros.io.console import log, progress
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.frame import Frame, Preprocessor, cropped
-from cemnet_ros.pipeline.preprocess import voxel_downsample
-from cemnet_ros.pipeline.refine import point_to_plane_icp
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor, cropped
+from cemnet_ros.pipeline.steps.preprocess import voxel_downsample
+from cemnet_ros.pipeline.steps.refine import point_to_plane_icp
 
 THREADS = 2  # every method's thread count (numba's, small_gicp's num_threads, KISS-ICP's max_num_threads)
 OURS = "ours"
@@ -512,7 +512,8 @@ def bench_sequence(sequence: Sequence, peers: dict[str, ModuleType], pairs: int,
 
 
 # -- start-up -----------------------------------------------------------------------------------------------------
-IMPORTS = {OURS: ("cemnet_ros.pipeline.preprocess", "cemnet_ros.pipeline.voxel_map", "cemnet_ros.pipeline.refine"),
+IMPORTS = {OURS: ("cemnet_ros.pipeline.steps.preprocess", "cemnet_ros.pipeline.map.voxel_map",
+                  "cemnet_ros.pipeline.steps.refine"),
            "small_gicp": PEER_MODULES["small_gicp"], "kiss_icp": PEER_MODULES["kiss_icp"]}
 FIRST_CALL_MAP = {OURS: OURS, "small_gicp": "small_gicp plane", "kiss_icp": "kiss_icp p2p"}
 

@@ -4,7 +4,7 @@ The package's one such ICP: the optional final refinement of a registration (``C
 and the classical baseline of the evaluation (:func:`cemnet_ros.eval.baselines.icp`). The CEM's own ICP steps
 (``CEMConfig.icp_steps``, behind the future reward) run in numba on look-up lattices (:mod:`.lattice_rewards`),
 or batched in torch on CUDA (:mod:`.icp_torch`); the scan pipeline's polish is a point-to-plane ICP against its
-map (:mod:`cemnet_ros.pipeline.refine`).
+map (:mod:`cemnet_ros.pipeline.steps.refine`).
 """
 from __future__ import annotations
 

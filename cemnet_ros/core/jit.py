@@ -1,5 +1,5 @@
-"""The package's one numba policy: every kernel (``core``, ``pipeline.preprocess``, ``refine``, ``voxel_*``) uses
-:func:`kernel`.
+"""The package's one numba policy: every kernel (``core``, ``pipeline.steps.preprocess`` and ``refine``,
+``pipeline.map.voxel_*``) uses :func:`kernel`.
 
 - **nogil**: every kernel releases the GIL, so that the ROS executor thread keeps receiving messages while a
   worker thread runs kernels.

@@ -26,8 +26,9 @@ import numba
 
 PACKAGE = Path(__file__).resolve().parents[1]
 # the kernel modules and the policy that compiles them (package-relative); test_kernel_cache checks it is complete
-SOURCES = ("core/jit.py", "core/lattice.py", "core/lattice_rewards.py", "pipeline/preprocess.py",
-           "pipeline/refine.py", "pipeline/voxel_hash.py", "pipeline/voxel_normals.py", "pipeline/voxel_query.py")
+SOURCES = ("core/jit.py", "core/lattice.py", "core/lattice_rewards.py", "pipeline/steps/preprocess.py",
+           "pipeline/steps/refine.py", "pipeline/map/voxel_hash.py", "pipeline/map/voxel_normals.py",
+           "pipeline/map/voxel_query.py")
 
 
 def kernel_digest(package: Path = PACKAGE) -> str:

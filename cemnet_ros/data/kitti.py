@@ -37,7 +37,7 @@ def kitti_scans(root: Path) -> Iterator[tuple[np.ndarray, np.ndarray]]:
 
 def kitti_frames(root: Path, crop: float, voxel: float) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Yield (points (n,3) float32 in the velodyne frame, T_world_velo): cropped to ``crop`` m, voxel-filtered."""
-    from cemnet_ros.pipeline.preprocess import voxel_downsample  # here: reading raw scans needs no pipeline
+    from cemnet_ros.pipeline.steps.preprocess import voxel_downsample  # here: reading raw scans needs no pipeline
 
     for pts, pose in kitti_scans(root):
         pts = pts[np.linalg.norm(pts, axis=1) <= crop]

@@ -99,7 +99,7 @@ def rgbd_frames(root: Union[str, Path], stride: int, voxel: float, max_depth: fl
                 ) -> Iterator[Tuple[np.ndarray, np.ndarray]]:
     """Yield (points (n, 3) in the camera optical frame, T_world_camera) per frame: back-projected every
     ``stride``-th pixel up to ``max_depth`` m, one point per ``voxel`` m voxel (the centroid)."""
-    from cemnet_ros.pipeline.preprocess import voxel_downsample  # as kitti_frames: only the filter
+    from cemnet_ros.pipeline.steps.preprocess import voxel_downsample  # as kitti_frames: only the filter
 
     intrinsics = read_intrinsics(root)
     for frame in depth_frames(root):

@@ -4,7 +4,7 @@ A real spinning LiDAR takes its sweep (0.1 s at 10 Hz) while moving; at 15 m/s t
 1.5 m apart and the scan is distorted (skewed). :func:`skewed_sequence` reproduces that with
 :mod:`cemnet_ros.data.scenes`' ray caster along a continuous trajectory, and returns the per-point times that a
 driver would put in the cloud (s, relative to the stamp) and the true poses at the stamps: the ground truth for
-deskewing (:mod:`cemnet_ros.pipeline.deskew`).
+deskewing (:mod:`cemnet_ros.pipeline.steps.deskew`).
 
 The default drive is a constant body twist (15 m/s forward, 30 deg/s yaw: a circle of 28.6 m radius, too wide
 for the courtyard) with small height, roll and pitch oscillations, in :func:`plaza_scene`, a 120 m walled square

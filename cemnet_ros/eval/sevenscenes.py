@@ -62,7 +62,7 @@ def resample(points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray
 
 def fused_points(frames: Sequence[DepthFrame], intrinsics: Intrinsics, cfg: SevenScenesConfig) -> np.ndarray:
     """The frames' points in the first frame's camera frame, one point per ``cfg.voxel``."""
-    from cemnet_ros.pipeline.preprocess import voxel_downsample  # as data.kitti: only the filter
+    from cemnet_ros.pipeline.steps.preprocess import voxel_downsample  # as data.kitti: only the filter
 
     T_first_world = np.linalg.inv(frames[0].T_world_camera)
     parts = []

@@ -1,8 +1,11 @@
 """Scan pipeline between sensor messages and the CEMNet core (no ROS imports here).
 
-Modules: ``config`` (the typed schema), ``preprocess`` (crop, voxel grid, subsets), ``voxel_map`` (the local
-map), ``refine`` (point-to-plane polish), ``motion`` (constant velocity), ``adaptive`` (search spread),
-``health`` (failure signals), ``covariance`` (from the polish's Hessian), ``aligner``
-(:class:`~cemnet_ros.pipeline.aligner.ScanAligner`, the recipe) and ``worker`` (bounded queue + thread).
-Import from the modules; this package stays import-light (no torch) for the ROS layer and tests.
+- ``aligner``: the recipe (:class:`~cemnet_ros.pipeline.aligner.ScanAligner`: check, preprocess, predict, track,
+  judge, recover, commit); ``pair_mode`` the same steps against a target cloud; ``config`` the typed schema.
+- ``steps/``: one module per step of the recipe (:mod:`cemnet_ros.pipeline.steps` lists them).
+- ``map/``: the local voxel map that tracking registers against, and its numba kernels.
+- ``node/``: the node's plumbing as plain code (loading, queue, pairing, verdicts, diagnostics, published numbers,
+  base frame), shared by ``align_node`` and the replay.
+
+Import from the modules; these packages stay import-light (no torch) for the ROS layer and tests.
 """

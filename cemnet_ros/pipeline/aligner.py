@@ -2,14 +2,14 @@
 
 Sequential mode registers each scan against a local map of the recent scans (:class:`VoxelMap`, odom frame):
 
-0. **check** the input's plausibility (:mod:`.input_checks`: stamp, frame, point count, size);
-1. **preprocess** (:mod:`.frame`, :mod:`.sweep`): deskew, drop non-finite points, crop by range, voxel grid;
+0. **check** the input's plausibility (:mod:`.steps.input_checks`: stamp, frame, point count, size);
+1. **preprocess** (:mod:`.steps.frame`, :mod:`.steps.sweep`): deskew, drop non-finite points, crop by range, voxel grid;
    the CEM's subset and the polish's subset;
 2. **predict**: the constant-velocity pose, and how far to search around it (:class:`AdaptiveSpread`);
-3. **track** (:mod:`.tracking`): the CEM around the prediction against a sample of the map, then a
+3. **track** (:mod:`.steps.tracking`): the CEM around the prediction against a sample of the map, then a
    point-to-plane polish against the map itself;
-4. **judge** the step without ground truth (:mod:`.verdict`: fitness, agreement, conditioning, spread);
-5. **recover** (:mod:`.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit at the
+4. **judge** the step without ground truth (:mod:`.steps.verdict`: fitness, agreement, conditioning, spread);
+5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit at the
    running level), on the first pair or on request:
    the global CEM search (yaw over the full circle, metres of translation), then the polish, judged the same
    way plus an ambiguity check between distinct hypotheses;
@@ -18,7 +18,7 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    the unconstrained directions, is flagged, and still extends the map.
 
 Pair mode (:mod:`.pair_mode`) runs steps 0-5 against a map of the target cloud. Poses are ``T_odom_sensor``;
-odom is the first scan's sensor frame. Units: see :mod:`.frame`.
+odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.
 """
 from __future__ import annotations
 
@@ -30,21 +30,21 @@ import numpy as np
 
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform, se3_log
-from cemnet_ros.pipeline import preprocess, refine
-from cemnet_ros.pipeline.adaptive import AdaptiveSpread
-from cemnet_ros.pipeline.basin import GicpCloud
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.covariance import flat_covariance
-from cemnet_ros.pipeline.frame import Frame, Preprocessor
-from cemnet_ros.pipeline.health import HealthMonitor
-from cemnet_ros.pipeline.input_checks import InputChecks
-from cemnet_ros.pipeline.motion import ConstantVelocity
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.pair_mode import PairMode
-from cemnet_ros.pipeline.recovery import Recovery, prior_registrar
-from cemnet_ros.pipeline.sweep import SweepDeskewer
-from cemnet_ros.pipeline.tracking import Tracker
-from cemnet_ros.pipeline.verdict import AlignmentStep, Estimate, StepJudge
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps import preprocess, refine
+from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.steps.basin import GicpCloud
+from cemnet_ros.pipeline.steps.covariance import flat_covariance
+from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
+from cemnet_ros.pipeline.steps.health import HealthMonitor
+from cemnet_ros.pipeline.steps.input_checks import InputChecks
+from cemnet_ros.pipeline.steps.motion import ConstantVelocity
+from cemnet_ros.pipeline.steps.recovery import Recovery, prior_registrar
+from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
+from cemnet_ros.pipeline.steps.tracking import Tracker
+from cemnet_ros.pipeline.steps.verdict import AlignmentStep, Estimate, StepJudge
 
 
 class ScanAligner:
@@ -118,11 +118,11 @@ class ScanAligner:
                 frame_id: str = "", now_ns: Optional[int] = None) -> AlignmentStep:
         """Register this scan against the local map and accumulate the pose.
 
-        The scan first passes the input checks (:mod:`.input_checks`: its non-finite points are dropped;
+        The scan first passes the input checks (:mod:`.steps.input_checks`: its non-finite points are dropped;
         ``now_ns``: the caller's clock for the future-stamp check); a rejected one raises ScanRejected and
         changes nothing. ``point_times``: each point's time (s, relative to
         ``stamp_ns``, aligned with ``points``); with ``config.preprocess.deskew`` the scan is first deskewed
-        (:mod:`.sweep`). The pose is the one at ``stamp_ns`` in any case.
+        (:mod:`.steps.sweep`). The pose is the one at ``stamp_ns`` in any case.
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
         admitted = self._checks.admit(points, point_times, stamp_ns, frame_id, now_ns)
@@ -139,7 +139,7 @@ class ScanAligner:
         return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._velocity, self._motion.has_velocity)
 
     def _process_at(self, points: np.ndarray, stamp_ns: int, start: float) -> AlignmentStep:
-        """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :mod:`.sweep`)."""
+        """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :mod:`.steps.sweep`)."""
         frame = self._preprocessor.frame(points)
         if self._last_stamp is not None and stamp_ns == self._last_stamp:
             return self._held(stamp_ns, start, frame, "duplicate stamp: scan skipped")

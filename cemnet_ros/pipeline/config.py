@@ -11,10 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from cemnet_ros.core.config import CEMConfig, GlobalSearchConfig, RegistrationConfig
-from cemnet_ros.pipeline.adaptive import AdaptiveConfig
-from cemnet_ros.pipeline.health import HealthConfig
-from cemnet_ros.pipeline.input_checks import InputChecksConfig
-from cemnet_ros.pipeline.preprocess import SAMPLING_METHODS
+from cemnet_ros.pipeline.steps.adaptive import AdaptiveConfig
+from cemnet_ros.pipeline.steps.health import HealthConfig
+from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig
+from cemnet_ros.pipeline.steps.preprocess import SAMPLING_METHODS
 from cemnet_ros.schema import param, section
 
 PRIORS = ("motion", "network", "identity")

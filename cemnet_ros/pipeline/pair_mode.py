@@ -13,13 +13,13 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.frame import Frame, Preprocessor
-from cemnet_ros.pipeline.input_checks import InputChecks, ScanRejected
-from cemnet_ros.pipeline.motion import ConstantVelocity
-from cemnet_ros.pipeline.recovery import Recovery
-from cemnet_ros.pipeline.tracking import Tracker
-from cemnet_ros.pipeline.verdict import AlignmentStep, Estimate
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
+from cemnet_ros.pipeline.steps.input_checks import InputChecks, ScanRejected
+from cemnet_ros.pipeline.steps.motion import ConstantVelocity
+from cemnet_ros.pipeline.steps.recovery import Recovery
+from cemnet_ros.pipeline.steps.tracking import Tracker
+from cemnet_ros.pipeline.steps.verdict import AlignmentStep, Estimate
 
 
 class PairMode:

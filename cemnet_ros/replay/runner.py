@@ -1,7 +1,7 @@
 """Run the scan pipeline (ScanAligner, sequential mode) over a bag's clouds and write ``replay.mcap``.
 
 The result bag holds what align_node (default node name) publishes per scan with the given node parameters
-(pipeline/odometry_output.py: the same numbers), plus the input's ground truth and /tf_static copied unchanged
+(pipeline/node/odometry_output.py: the same numbers), plus the input's ground truth and /tf_static copied unchanged
 (same topics, types, header stamps and bag times), in bag-time order. A cloud message that gives no pose
 (undecodable, truncated, too few points, rejected by the aligner, ...) is skipped and counted: the other scans
 go through the aligner exactly as in a bag without it.
@@ -18,9 +18,9 @@ from typing import Optional
 import numpy as np
 from tqdm import tqdm
 
-from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy
-from cemnet_ros.pipeline.input_checks import ScanRejected
-from cemnet_ros.pipeline.odometry_output import OdometryOutput, aligned_points, odometry_output, tf_parent_child
+from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.pipeline.node.odometry_output import OdometryOutput, aligned_points, odometry_output, tf_parent_child
+from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.replay.bag_io import (
     ODOMETRY,
     POINTCLOUD2,

@@ -2,10 +2,10 @@
 
 The ROS layer converts, queues and publishes; what it decides is plain code in :mod:`cemnet_ros.pipeline`. The
 subscriptions take the messages' CDR bytes and only queue them (:mod:`.scans`, pair mode through
-:class:`~cemnet_ros.pipeline.pairing.PairMatcher`); a background thread loads the engine (so that the
+:class:`~cemnet_ros.pipeline.node.pairing.PairMatcher`); a background thread loads the engine (so that the
 subscriptions exist at once and early scans wait in the queue); one worker thread deserializes and decodes,
-then registers through :class:`~cemnet_ros.pipeline.aligner_session.AlignerSession` and publishes
-(:mod:`.outputs`). Every input gets a verdict (:mod:`~cemnet_ros.pipeline.scan_status`); a full queue drops its
+then registers through :class:`~cemnet_ros.pipeline.node.aligner_session.AlignerSession` and publishes
+(:mod:`.outputs`). Every input gets a verdict (:mod:`~cemnet_ros.pipeline.node.scan_status`); a full queue drops its
 oldest message before it is deserialized, counted and reported. Services: :mod:`.services`.
 
 Modes: ``sequential`` registers each ``input_topic`` scan against a local map (odometry of ``base_frame`` in
@@ -27,13 +27,13 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 
-from cemnet_ros.pipeline.aligner_session import AlignerSession, StepResult
-from cemnet_ros.pipeline.extrinsic import BaseFrame, pose_from_xyz_rpy, transform_msg_to_matrix
-from cemnet_ros.pipeline.input_checks import ScanRejected
-from cemnet_ros.pipeline.node_status import NodeStatus
-from cemnet_ros.pipeline.pairing import PairMatcher
-from cemnet_ros.pipeline.scan_status import Outcome, ScanStatus
-from cemnet_ros.pipeline.worker import BoundedWorker
+from cemnet_ros.pipeline.node.aligner_session import AlignerSession, StepResult
+from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy, transform_msg_to_matrix
+from cemnet_ros.pipeline.node.node_status import NodeStatus
+from cemnet_ros.pipeline.node.pairing import PairMatcher
+from cemnet_ros.pipeline.node.scan_status import Outcome, ScanStatus
+from cemnet_ros.pipeline.node.worker import BoundedWorker
+from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.ros.outputs import NodeOutputs
 from cemnet_ros.ros.parameters import ConfigError, declare_and_read
 from cemnet_ros.ros.scans import Incoming, Scan, decode

@@ -17,8 +17,8 @@ from torch.utils.data import Dataset
 from cemnet_ros.core.geometry import action_to_matrix_np, apply_transform
 from cemnet_ros.core.global_search import scatter
 from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig
-from cemnet_ros.pipeline.frame import near_points, network_units
-from cemnet_ros.pipeline.preprocess import subsample
+from cemnet_ros.pipeline.steps.frame import near_points, network_units
+from cemnet_ros.pipeline.steps.preprocess import subsample
 
 from .bag_scans import ScanSet
 from .config import ScanPairConfig

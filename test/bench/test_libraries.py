@@ -30,8 +30,8 @@ from cemnet_ros.bench.metrics import relative_error
 from cemnet_ros.bench.real import Sequence
 from cemnet_ros.core.geometry import apply_transform, rigid_transform
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.frame import Frame
-from cemnet_ros.pipeline.preprocess import voxel_downsample
+from cemnet_ros.pipeline.steps.frame import Frame
+from cemnet_ros.pipeline.steps.preprocess import voxel_downsample
 
 VOXEL = 0.2
 STAGES = [Stage(1000, 6 * VOXEL, 30), Stage(3000, 2 * VOXEL, 10)]

@@ -11,8 +11,8 @@ from cemnet_ros.core import CEMConfig, RegistrationConfig
 from cemnet_ros.data.street import make_transform, make_world, street_scan
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
-from cemnet_ros.pipeline.input_checks import InputChecksConfig, ScanRejected
-from cemnet_ros.pipeline.preprocess import (
+from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig, ScanRejected
+from cemnet_ros.pipeline.steps.preprocess import (
     robust_radius,
 )
 

@@ -3,15 +3,15 @@ import numpy as np
 import pytest
 
 from cemnet_ros.data.street import make_transform
-from cemnet_ros.pipeline.adaptive import AdaptiveConfig, AdaptiveSpread
-from cemnet_ros.pipeline.covariance import (
+from cemnet_ros.pipeline.steps.adaptive import AdaptiveConfig, AdaptiveSpread
+from cemnet_ros.pipeline.steps.covariance import (
     MIN_STD_ROTATION,
     Conditioning,
     covariance_from_hessian,
     flat_covariance,
     keep_prediction_along,
 )
-from cemnet_ros.pipeline.health import HealthConfig, HealthMonitor, Signals
+from cemnet_ros.pipeline.steps.health import HealthConfig, HealthMonitor, Signals
 
 GOOD = Signals(fitness=0.8, disagreement_m=0.05, disagreement_rad=0.005, conditioning=0.3, spread_m=0.1)
 

@@ -2,7 +2,7 @@
 import numpy as np
 
 from cemnet_ros.data.street import make_transform
-from cemnet_ros.pipeline.motion import ConstantVelocity, se3_power
+from cemnet_ros.pipeline.steps.motion import ConstantVelocity, se3_power
 
 
 def test_constant_velocity_repeats_and_rescales_the_last_motion():

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from cemnet_ros.pipeline.node_status import ERROR, OK, WARN, NodeStatus
-from cemnet_ros.pipeline.pairing import PairMatcher
+from cemnet_ros.pipeline.node.node_status import ERROR, OK, WARN, NodeStatus
+from cemnet_ros.pipeline.node.pairing import PairMatcher
 
 
 class Clock:

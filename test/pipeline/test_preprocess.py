@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cemnet_ros.pipeline.preprocess import (
+from cemnet_ros.pipeline.steps.preprocess import (
     crop_range,
     farthest_point_indices,
     finite_points,

@@ -4,8 +4,8 @@ from scipy.spatial.transform import Rotation
 
 from cemnet_ros.bench.metrics import relative_error
 from cemnet_ros.data.street import make_transform, make_world, seen_from
-from cemnet_ros.pipeline.refine import point_to_plane_icp
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.refine import point_to_plane_icp
 
 
 def map_of(points, voxel_size=0.5, per_voxel=20):

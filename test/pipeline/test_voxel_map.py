@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 
 
 def test_insert_caps_each_voxel_and_keeps_its_first_points():

@@ -17,7 +17,7 @@ from tiny_training import bag_config
 from cemnet_ros.core.checkpoint import load_network
 from cemnet_ros.core.geometry import apply_transform, matrix_to_action_np
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.frame import Preprocessor
+from cemnet_ros.pipeline.steps.frame import Preprocessor
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.tools import train_cli
 from cemnet_ros.train.config import ScanPairConfig

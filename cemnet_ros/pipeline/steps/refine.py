@@ -1,4 +1,4 @@
-"""Point-to-plane ICP of a scan against the local map (:class:`~cemnet_ros.pipeline.voxel_map.VoxelMap`), metres.
+"""Point-to-plane ICP of a scan against the local map (:class:`~cemnet_ros.pipeline.map.voxel_map.VoxelMap`), metres.
 
 Gauss-Newton on r_i = n_q . (R p_i + t - q), q the nearest map point within ``max_distance`` and n_q its
 normal, each pair weighted by q's planarity times a Geman-McClure weight of its residual (a q without a
@@ -19,9 +19,9 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.jit import FASTMATH_INF_SAFE, kernel
-from cemnet_ros.pipeline.voxel_map import VoxelMap
-from cemnet_ros.pipeline.voxel_map import compile_kernels as compile_map_kernels
-from cemnet_ros.pipeline.voxel_query import nearest_slot
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import compile_kernels as compile_map_kernels
+from cemnet_ros.pipeline.map.voxel_query import nearest_slot
 
 N_CHUNKS = 32  # partial sums; a fixed count: the sums do not depend on the thread count
 N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs

@@ -97,7 +97,7 @@ class NodeStatus:
             return None if not self._arrivals.times else self._clock() - self._arrivals.times[-1]
 
     def report(self, queue: Any, scale: Optional[float], publishers: int = 0) -> Report:
-        """The status now; ``queue`` is the worker's :class:`~cemnet_ros.pipeline.worker.WorkerStats`,
+        """The status now; ``queue`` is the worker's :class:`~cemnet_ros.pipeline.node.worker.WorkerStats`,
         ``publishers`` the number matched on the input topic."""
         with self._lock:
             now = self._clock()

@@ -1,4 +1,4 @@
-"""Recovery (step 5 of the recipe in :mod:`.aligner`): the global CEM search when tracking cannot be trusted.
+"""Recovery (step 5 of the recipe in :mod:`..aligner`): the global CEM search when tracking cannot be trusted.
 
 It runs on the first pair, when tracking failed or is unconfirmed, or on request: the search
 (:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation; with
@@ -19,14 +19,14 @@ from cemnet_ros.core import Registrar, RegistrationConfig
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.core.global_search import SearchPrior, global_search
 from cemnet_ros.core.registration import NETWORK_MIN_POINTS
-from cemnet_ros.pipeline.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.frame import Frame
-from cemnet_ros.pipeline.hypotheses import choose
-from cemnet_ros.pipeline.preprocess import subsample, voxel_downsample
-from cemnet_ros.pipeline.tracking import PREDICTION_SPREADS, map_sample, wide_polish
-from cemnet_ros.pipeline.verdict import Estimate, StepJudge
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.steps.frame import Frame
+from cemnet_ros.pipeline.steps.hypotheses import choose
+from cemnet_ros.pipeline.steps.preprocess import subsample, voxel_downsample
+from cemnet_ros.pipeline.steps.tracking import PREDICTION_SPREADS, map_sample, wide_polish
+from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
 
 POLISH_FRACTION = 0.8  # hypotheses whose CEM fitness is this close to the best one's get polished
 

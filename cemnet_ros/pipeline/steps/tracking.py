@@ -1,4 +1,4 @@
-"""Tracking (step 3 of the recipe in :mod:`.aligner`): the CEM around the motion prediction, then the polish.
+"""Tracking (step 3 of the recipe in :mod:`..aligner`): the CEM around the motion prediction, then the polish.
 
 The CEM registers the frame's CEM subset against a sample of the map near the predicted sensor position, in
 network units, with a spread that the recent prediction errors set (:class:`~.adaptive.AdaptiveSpread`). Its
@@ -13,14 +13,14 @@ import numpy as np
 
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.pipeline.adaptive import AdaptiveSpread
-from cemnet_ros.pipeline.basin import gicp
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.frame import Frame
-from cemnet_ros.pipeline.hypotheses import choose, distinct
-from cemnet_ros.pipeline.refine import PolishResult, point_to_plane_icp
-from cemnet_ros.pipeline.verdict import Estimate, StepJudge
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.steps.basin import gicp
+from cemnet_ros.pipeline.steps.frame import Frame
+from cemnet_ros.pipeline.steps.hypotheses import choose, distinct
+from cemnet_ros.pipeline.steps.refine import PolishResult, point_to_plane_icp
+from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
 
 PREDICTION_SPREADS = 3.0  # an answer further than this many tracking spreads is not explained by the prediction
 

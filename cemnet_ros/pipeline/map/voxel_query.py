@@ -1,7 +1,7 @@
 """Queries of the local map (numba): exact nearest map point within a bound, map points within a ball.
 
-:func:`nearest_slot` is also the correspondence search of the point-to-plane ICP (:mod:`cemnet_ros.pipeline.refine`),
-on a map's :meth:`~cemnet_ros.pipeline.voxel_map.VoxelMap.view`.
+:func:`nearest_slot` is also the correspondence search of the point-to-plane ICP
+(:mod:`cemnet_ros.pipeline.steps.refine`), on a map's :meth:`~cemnet_ros.pipeline.map.voxel_map.VoxelMap.view`.
 """
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.jit import FASTMATH_INF_SAFE, kernel
-from cemnet_ros.pipeline.voxel_hash import cell_index, find, pack, unpack
+from cemnet_ros.pipeline.map.voxel_hash import cell_index, find, pack, unpack
 
 
 @kernel(fastmath=FASTMATH_INF_SAFE)

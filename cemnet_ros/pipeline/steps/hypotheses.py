@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cemnet_ros.pipeline.health import disagreement
-from cemnet_ros.pipeline.verdict import Estimate
+from cemnet_ros.pipeline.steps.health import disagreement
+from cemnet_ros.pipeline.steps.verdict import Estimate
 
 DISTINCT_M, DISTINCT_RAD = 0.1, np.radians(1.0)  # answers farther apart than what the node vouches for differ
 

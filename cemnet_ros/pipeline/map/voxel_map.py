@@ -4,8 +4,8 @@ In the spirit of KISS-ICP's VoxelHashMap: space is cut into voxels of ``voxel_si
 ``max_points_per_voxel`` points that fall into it (later points of a full voxel are dropped, so the map does not
 grow where the sensor stays), and voxels farther than ``max_distance`` from the sensor are forgotten. Every point
 carries a unit normal and a planarity weight in [0, 1], estimated once when it is inserted, from the map points
-around it, for the point-to-plane ICP of :mod:`cemnet_ros.pipeline.refine`. The last scan inserted is also kept
-thinned to the voxel with covariances: the target of the polish's wide stage (:mod:`.basin`).
+around it, for the point-to-plane ICP of :mod:`cemnet_ros.pipeline.steps.refine`. The last scan inserted is also kept
+thinned to the voxel with covariances: the target of the polish's wide stage (:mod:`..steps.basin`).
 
 The storage and its kernels are :mod:`.voxel_hash` (hash table, insertion, pruning), the normals
 :mod:`.voxel_normals`, the queries :mod:`.voxel_query`; the numba policy (cached on disk, made ready at start by
@@ -19,10 +19,10 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.pipeline.basin import GicpCloud, gicp_cloud
-from cemnet_ros.pipeline.voxel_hash import EMPTY, insert_points, prune_far_voxels, rehash
-from cemnet_ros.pipeline.voxel_normals import NORMAL_RADIUS, estimate_normals
-from cemnet_ros.pipeline.voxel_query import nearest_batch, slots_within
+from cemnet_ros.pipeline.map.voxel_hash import EMPTY, insert_points, prune_far_voxels, rehash
+from cemnet_ros.pipeline.map.voxel_normals import NORMAL_RADIUS, estimate_normals
+from cemnet_ros.pipeline.map.voxel_query import nearest_batch, slots_within
+from cemnet_ros.pipeline.steps.basin import GicpCloud, gicp_cloud
 
 
 class VoxelMap:
@@ -61,7 +61,7 @@ class VoxelMap:
 
     @property
     def last_scan(self) -> Optional[GicpCloud]:
-        """The last points inserted, thinned to the voxel, with covariances (:mod:`.basin`); None when empty."""
+        """The last points inserted, thinned to the voxel, with covariances (:mod:`..steps.basin`); None when empty."""
         if self._last_scan is None and self._make_last_scan is not None:
             self._last_scan = self._make_last_scan()
         return self._last_scan
@@ -93,7 +93,7 @@ class VoxelMap:
                scan: Optional[Callable[[], GicpCloud]] = None) -> None:
         """Insert ``points`` (map frame) into voxels with room, estimate their normals, drop far voxels.
 
-        ``scan``: makes the same points as a :class:`~.basin.GicpCloud` thinned to the map's voxel, placed where
+        ``scan``: makes the same points as a :class:`~..steps.basin.GicpCloud` thinned to the map's voxel, placed where
         they were inserted (:attr:`last_scan`, made when first asked for; from ``points`` when not given)."""
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         self._reserve(len(points))

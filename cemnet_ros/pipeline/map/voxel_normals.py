@@ -1,7 +1,7 @@
 """Normals of the local map's points (numba): PCA of the map points around each new point, voxel by voxel.
 
 Every point gets a unit normal and a planarity weight in [0, 1] once, when it is inserted, for the
-point-to-plane ICP of :mod:`cemnet_ros.pipeline.refine`. The storage layout is :mod:`.voxel_hash`'s.
+point-to-plane ICP of :mod:`cemnet_ros.pipeline.steps.refine`. The storage layout is :mod:`.voxel_hash`'s.
 """
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.jit import FASTMATH_INF_SAFE, kernel
-from cemnet_ros.pipeline.voxel_hash import find, pack, unpack
+from cemnet_ros.pipeline.map.voxel_hash import find, pack, unpack
 
 MIN_NEIGHBOURS = 5  # fewer map points around a new point leave its normal undefined (planarity 0)
 NORMAL_RADIUS = 1.0  # neighbourhood of the normal estimation, in voxels

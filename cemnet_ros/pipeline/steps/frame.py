@@ -1,4 +1,4 @@
-"""Scans made into frames in the trajectory's units (step 1 of the recipe in :mod:`.aligner`).
+"""Scans made into frames in the trajectory's units (step 1 of the recipe in :mod:`..aligner`).
 
 Units: the network and the CEM's epsilon live on the ModelNet unit sphere. A trajectory's ``scale`` (metres per
 network unit) is fixed by configuration or, in auto mode, by the robust radius of the scan that starts it; the
@@ -12,11 +12,11 @@ from typing import Optional
 
 import numpy as np
 
-from cemnet_ros.pipeline.basin import GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig
-from cemnet_ros.pipeline.input_checks import ScanRejected
-from cemnet_ros.pipeline.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.basin import GicpCloud, gicp_cloud
+from cemnet_ros.pipeline.steps.input_checks import ScanRejected
+from cemnet_ros.pipeline.steps.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
 
 LOST_RESCALE_RATIO = 2.0  # a lost trajectory measures the auto scale again on a scan this much larger or smaller
 

@@ -1,4 +1,4 @@
-"""Judging a registration without ground truth (step 4 of the recipe in :mod:`.aligner`), and what is published.
+"""Judging a registration without ground truth (step 4 of the recipe in :mod:`..aligner`), and what is published.
 
 An :class:`Estimate` is a registration and its verdict before it is committed: failures (it cannot be vouched
 for: the prediction is published instead), notes (degenerate, an ambiguity resolved: flagged, its pose used) and
@@ -12,11 +12,16 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.covariance import Conditioning, covariance_from_hessian, flat_covariance, keep_prediction_along
-from cemnet_ros.pipeline.frame import Frame
-from cemnet_ros.pipeline.health import HealthMonitor, Signals, disagreement
-from cemnet_ros.pipeline.refine import PolishResult
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.covariance import (
+    Conditioning,
+    covariance_from_hessian,
+    flat_covariance,
+    keep_prediction_along,
+)
+from cemnet_ros.pipeline.steps.frame import Frame
+from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals, disagreement
+from cemnet_ros.pipeline.steps.refine import PolishResult
 
 LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
 MIN_POLISH_PAIRS = 10  # a polish with fewer point-to-plane pairs constrains nothing

@@ -3,7 +3,7 @@
 Storage is flat: voxel ``v`` owns the point slots ``v * M .. v * M + M - 1`` (``M = max_points_per_voxel``),
 voxels are kept dense (a removed voxel is replaced by the last one) and an open-addressing hash table (linear
 probing, backward-shift deletion) maps packed int64 voxel keys to voxel indices. Voxel indices are limited to
-+-2^20 per axis (+-105 km at 0.1 m voxels). The map itself: :class:`cemnet_ros.pipeline.voxel_map.VoxelMap`.
++-2^20 per axis (+-105 km at 0.1 m voxels). The map itself: :class:`cemnet_ros.pipeline.map.voxel_map.VoxelMap`.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: multiply, keep the 
 # -- hash table -------------------------------------------------------------------------------------------------
 @kernel
 def cell_index(x, voxel_size):
-    """Voxel index of a coordinate (the same floor as :func:`cemnet_ros.pipeline.preprocess.voxel_downsample`)."""
+    """Voxel index of a coordinate (the same floor as :func:`cemnet_ros.pipeline.steps.preprocess.voxel_downsample`)."""
     return np.int64(np.floor(x / voxel_size))
 
 

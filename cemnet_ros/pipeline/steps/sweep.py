@@ -1,4 +1,4 @@
-"""Deskewing across scans (step 1 of the recipe in :mod:`.aligner`): the sweep's reference time, the map's
+"""Deskewing across scans (step 1 of the recipe in :mod:`..aligner`): the sweep's reference time, the map's
 first scans, the pose at the stamp.
 
 With per-point times and ``preprocess.deskew`` a scan is registered at the sweep's middle (fixed from the first
@@ -17,11 +17,11 @@ from typing import Callable, Optional
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform, se3_exp
-from cemnet_ros.pipeline.deskew import deskew
-from cemnet_ros.pipeline.frame import Preprocessor
-from cemnet_ros.pipeline.input_checks import ScanRejected
-from cemnet_ros.pipeline.verdict import AlignmentStep
-from cemnet_ros.pipeline.voxel_map import VoxelMap
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.deskew import deskew
+from cemnet_ros.pipeline.steps.frame import Preprocessor
+from cemnet_ros.pipeline.steps.input_checks import ScanRejected
+from cemnet_ros.pipeline.steps.verdict import AlignmentStep
 
 SkewedScan = tuple[np.ndarray, np.ndarray]  # points, times relative to the reference (s)
 Velocity = Callable[[], Optional[np.ndarray]]  # the motion model's twist (6,) per second, None: none yet

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.pipeline.extrinsic import BaseFrame, in_body_axes
+from cemnet_ros.pipeline.node.extrinsic import BaseFrame, in_body_axes
 
 UNKNOWN_VARIANCE = 1e6  # a twist nobody measured yet (the first scan): huge, never zero
 
@@ -85,7 +85,7 @@ def aligned_points(points_sensor: np.ndarray, T_odom_sensor: np.ndarray, voxel: 
     points_odom = apply_transform(T_odom_sensor, points_sensor)
     if voxel <= 0:
         return points_odom
-    from cemnet_ros.pipeline.preprocess import voxel_downsample  # numba: not at the node's start-up
+    from cemnet_ros.pipeline.steps.preprocess import voxel_downsample  # numba: not at the node's start-up
 
     return voxel_downsample(points_odom, voxel)
 

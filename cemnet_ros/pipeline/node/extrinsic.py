@@ -5,7 +5,7 @@ the base frame at that first scan, so with the extrinsic ``T_base_sensor``::
 
     T_odom_base = T_base_sensor @ T_sensor0_sensor @ inv(T_base_sensor)
 
-A covariance given about the sensor's position in sensor0 axes (the polish's, :mod:`.covariance`) becomes one
+A covariance given about the sensor's position in sensor0 axes (the polish's, :mod:`..steps.covariance`) becomes one
 about the base's position in odom axes: rotations turn with R_base_sensor, translations also pick up the
 lever arm between the two origins.
 """

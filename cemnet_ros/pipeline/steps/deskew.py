@@ -15,7 +15,7 @@ relative to it; so wherever a driver puts its stamp, the times say it. KISS-ICP 
 per stamp interval, which need not be the sweep's) and presumes the stamp's place in the sweep.
 
 :func:`deskew` moves the points to the instant their times are relative to (the stamp, or any reference: shift
-the times). The pipeline (:class:`~cemnet_ros.pipeline.sweep.SweepDeskewer`) deskews to
+the times). The pipeline (:class:`~cemnet_ros.pipeline.steps.sweep.SweepDeskewer`) deskews to
 the sweep's middle, where a registration pins the pose whatever the velocity used, and publishes the pose at
 the stamp.
 """
