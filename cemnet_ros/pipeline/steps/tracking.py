@@ -61,8 +61,8 @@ class Tracker:
         """The registration of ``frame`` near ``T_predicted`` (``T_last``: the last pose; ``dt_ratio``: this time
         step over the usual one, which widens the spread).
 
-        The CEM's answer, finely polished, stands when it fits as well as the recent steps did (the usual
-        step). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished from
+        The CEM's answer, finely polished, stands when it is confirmed on its own (:meth:`_stands_alone`: the
+        usual step). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished from
         afar, and, unless one of them stands on its own, the last pose (a stop, a jerk: the
         sensor did not move as it did). The fittest wins, near-ties go to the nearest (a direction the scene
         hardly constrains stays at the prediction). Returns the chosen answer and all of them (the recovery's
@@ -81,7 +81,7 @@ class Tracker:
         T_cem, spread_m = self._cem(frame, clouds, to_units, from_units, centre, sigma)
         usual = self.judge.judge(frame, target_map, T_predicted, T_cem, fine_polish(cfg, frame, target_map, T_cem),
                                  spread_m, recovered=False, prediction_std=translation, origin="cem")
-        if self._as_usual(usual):
+        if self._stands_alone(usual):
             return usual, [usual]
         starts: list[np.ndarray] = []
         estimates: list[Estimate] = []
@@ -107,11 +107,6 @@ class Tracker:
             return list(estimate.failures)
         why = self.judge.health.unconfirmed(estimate.signals.fitness, estimate.support, after_gap)
         return [why] if why else []
-
-    def _as_usual(self, estimate: Estimate) -> bool:
-        """No failure, and a fit at least the running level of the recent good steps: the usual step."""
-        level = self.judge.health.level
-        return not estimate.failures and level is not None and estimate.signals.fitness >= level
 
     def _stands_alone(self, estimate: Estimate) -> bool:
         """No failure, and confirmed without a second start (at ``health.confirm_ratio`` x the running level)."""
