@@ -7,15 +7,17 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    the CEM's subset and the polish's subset;
 2. **predict**: the constant-velocity pose, and how far to search around it (:class:`AdaptiveSpread`);
 3. **track** (:mod:`.steps.tracking`): the CEM around the prediction against a sample of the map, then a
-   point-to-plane polish against the map itself;
-4. **judge** the step without ground truth (:mod:`.steps.verdict`: fitness, agreement, conditioning, spread);
-5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit at the
-   running level), on the first pair or on request:
-   the global CEM search (yaw over the full circle, metres of translation), then the polish, judged the same
-   way plus an ambiguity check between distinct hypotheses;
+   point-to-plane polish against the map itself; unless that answer stands on its own, it competes with the
+   prediction and the last pose, each polished from afar (:mod:`.steps.hypotheses`);
+4. **judge** the step without ground truth (:mod:`.steps.verdict`: fitness in metres, confirmation,
+   conditioning);
+5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit
+   at the running level), on the first pair or on request: the global CEM search (yaw over the full circle,
+   metres of translation), each hypothesis polished from afar and competing with tracking's answers;
 6. **commit**: a good step moves the pose, the map, the motion model and the adaptive spread; a failed one is
    published flagged with the prediction and changes nothing else; a degenerate one keeps the prediction along
-   the unconstrained directions, is flagged, and still extends the map.
+   the unconstrained directions, is flagged, and still extends the map; one chosen among near-ties is flagged
+   and moves the pose only.
 
 Pair mode (:mod:`.pair_mode`) runs steps 0-5 against a map of the target cloud. Poses are ``T_odom_sensor``;
 odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.

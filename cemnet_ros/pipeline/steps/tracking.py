@@ -62,8 +62,8 @@ class Tracker:
         step over the usual one, which widens the spread).
 
         The CEM's answer, finely polished, stands when it is confirmed on its own (:meth:`_stands_alone`: the
-        usual step). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished from
-        afar, and, unless one of them stands on its own, the last pose (a stop, a jerk: the
+        usual step). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished
+        from afar, and, unless one of them stands on its own, the last pose (a stop, a jerk, a turn reversed: the
         sensor did not move as it did). The fittest wins, near-ties go to the nearest (a direction the scene
         hardly constrains stays at the prediction). Returns the chosen answer and all of them (the recovery's
         rivals).
