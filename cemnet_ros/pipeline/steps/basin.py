@@ -28,9 +28,6 @@ class GicpCloud:
     tree: small_gicp.KdTree
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))
 
-    def __len__(self) -> int:
-        return int(self.points.size())
-
     def placed(self, pose: np.ndarray) -> "GicpCloud":
         """The same cloud at ``pose`` (no copy of the points: a scan kept by the map where it was inserted)."""
         return replace(self, pose=np.asarray(pose, dtype=np.float64).copy())
