@@ -17,7 +17,7 @@ the truth offset by 0.3 m / 3 deg and 1 m / 10 deg (``--seeds`` random direction
 the share within 10 cm / 1 deg. Start-up: import and first-call ms in fresh processes (``--startup-runs``), ours
 with its numba cache and, unless ``--no-cold``, once with an empty one. Prints tables, writes the JSON atomically.
 
-    python scripts/bench_libraries.py --balm /work/data/datas/benchmark_realworld --out results/bench_libraries.json
+    python scripts/bench_libraries.py --balm BALM/datas/benchmark_realworld --out results/bench_libraries.json
 """
 from __future__ import annotations
 
