@@ -241,6 +241,17 @@ def downsample_calls(points: np.ndarray, voxel: float, peers: dict[str, ModuleTy
     return calls
 
 
+def staged(stages: list[Stage], initial: np.ndarray, align: Callable[[Stage, np.ndarray], Any]
+           ) -> tuple[np.ndarray, int]:
+    """(T_target_source, steps taken) of ``align(stage, T_target_source)`` run stage after stage from ``initial``;
+    ``align`` returns a result with ``T_target_source`` and ``iterations`` (ours and small_gicp's alike)."""
+    T_target_source, steps = initial, 0
+    for stage in stages:
+        result = align(stage, T_target_source)
+        T_target_source, steps = result.T_target_source, steps + result.iterations
+    return T_target_source, steps
+
+
 class OursMap:
     """The node's local map (:class:`VoxelMap`: points with normals) and polish (:func:`point_to_plane_icp`)."""
 
@@ -253,12 +264,8 @@ class OursMap:
 
     def polish(self, step: Step, initial: np.ndarray, stages: list[Stage]) -> tuple[np.ndarray, Optional[int]]:
         """(T_target_source, Gauss-Newton steps taken) of the stages in turn."""
-        T_target_source, steps = initial, 0
-        for stage in stages:
-            result = point_to_plane_icp(self.map, stage.subset(step.polish), T_target_source, stage.max_distance,
-                                        stage.iters, convergence=CONVERGENCE)
-            T_target_source, steps = result.T_target_source, steps + result.iterations
-        return T_target_source, steps
+        return staged(stages, initial, lambda stage, T: point_to_plane_icp(
+            self.map, stage.subset(step.polish), T, stage.max_distance, stage.iters, convergence=CONVERGENCE))
 
 
 def covariance_cloud(sg: ModuleType, points: np.ndarray) -> Any:
@@ -292,16 +299,11 @@ class SmallGicpCloudMap:
     def polish(self, step: Step, initial: np.ndarray, stages: list[Stage]) -> tuple[np.ndarray, Optional[int]]:
         plane = self.registration_type == "PLANE_ICP"
         gicp_source = None if plane else covariance_cloud(self.sg, step.dense)
-        T_target_source, steps = initial, 0
-        for stage in stages:
-            source = self.sg.PointCloud(stage.subset(step.polish)) if plane else gicp_source
-            result = self.sg.align(self.cloud, source, self.tree, T_target_source,
-                                   registration_type=self.registration_type,
-                                   max_correspondence_distance=stage.max_distance, num_threads=THREADS,
-                                   max_iterations=stage.iters, rotation_epsilon=CONVERGENCE,
-                                   translation_epsilon=CONVERGENCE)
-            T_target_source, steps = result.T_target_source, steps + result.iterations
-        return T_target_source, steps
+        return staged(stages, initial, lambda stage, T: self.sg.align(
+            self.cloud, self.sg.PointCloud(stage.subset(step.polish)) if plane else gicp_source, self.tree, T,
+            registration_type=self.registration_type, max_correspondence_distance=stage.max_distance,
+            num_threads=THREADS, max_iterations=stage.iters, rotation_epsilon=CONVERGENCE,
+            translation_epsilon=CONVERGENCE))
 
 
 class SmallGicpVgicpMap:
@@ -317,14 +319,9 @@ class SmallGicpVgicpMap:
 
     def polish(self, step: Step, initial: np.ndarray, stages: list[Stage]) -> tuple[np.ndarray, Optional[int]]:
         source = covariance_cloud(self.sg, step.dense)
-        T_target_source, steps = initial, 0
-        for stage in stages:
-            result = self.sg.align(self.voxels, source, T_target_source,
-                                   max_correspondence_distance=stage.max_distance, num_threads=THREADS,
-                                   max_iterations=stage.iters, rotation_epsilon=CONVERGENCE,
-                                   translation_epsilon=CONVERGENCE)
-            T_target_source, steps = result.T_target_source, steps + result.iterations
-        return T_target_source, steps
+        return staged(stages, initial, lambda stage, T: self.sg.align(
+            self.voxels, source, T, max_correspondence_distance=stage.max_distance, num_threads=THREADS,
+            max_iterations=stage.iters, rotation_epsilon=CONVERGENCE, translation_epsilon=CONVERGENCE))
 
 
 class KissMap:
