@@ -30,6 +30,7 @@ import numpy as np
 from cemnet_ros.schema import param
 
 SECTORS = 36  # azimuth bins of the coverage check
+COVERAGE_SAMPLES = 16384  # points the coverage is counted on (a share per sector needs no more)
 EARLY_LEVEL = 3  # a level from fewer scans than this may rest on an implausible start
 UPWARD_RATIO = 4.0  # ... which shows as the next scan having this many times the points
 
@@ -191,9 +192,11 @@ def _finite(points: np.ndarray, times: Optional[np.ndarray]) -> tuple[np.ndarray
 
 
 def _coverage(points: np.ndarray) -> float:
-    """Fraction of the SECTORS azimuth sectors holding at least 2 % of a uniform share of the points (>= 3)."""
+    """Fraction of the SECTORS azimuth sectors holding at least 2 % of a uniform share of the points (>= 3),
+    counted on every k-th point (about COVERAGE_SAMPLES): each ring or row of a scan sweeps the azimuths."""
     if not len(points):
         return 0.0
+    points = points[::max(1, len(points) // COVERAGE_SAMPLES)]
     azimuth = np.arctan2(points[:, 1], points[:, 0])
     sector = np.minimum(((azimuth + np.pi) * (SECTORS / (2 * np.pi))).astype(np.int64), SECTORS - 1)
     counts = np.bincount(sector, minlength=SECTORS)
