@@ -36,7 +36,7 @@ class CemSubset:
 @dataclass
 class Frame:
     """A preprocessed scan (sensor frame, metres): voxel cloud (map), polish subset and, made when first asked
-    for (a step whose prediction stands needs no CEM), the CEM's subsets.
+    for (a map restart or a pair target needs none), the CEM's subsets.
 
     The CEM sees points near the sensor only: its look-up lattices span the clouds' box, and far points make
     that box (and its cache misses) large for little information.
