@@ -175,7 +175,7 @@ class ScanAligner:
         self._last_stamp, self._period_ns = stamp_ns, None
         self._pending_recovery = "first pair"  # a single pose predicts nothing
         return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 1.0, not restarted,
-                             time.perf_counter() - start, len(frame.dense), reason)
+                             time.perf_counter() - start, len(frame.sampled), reason)
 
     def _restart_map(self, frame: Frame, T_odom_sensor: np.ndarray) -> None:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
@@ -208,7 +208,7 @@ class ScanAligner:
         return AlignmentStep(stamp_ns, pose.copy(), np.linalg.inv(previous) @ pose,
                              estimate.published_covariance(self.config.health.covariance_inflation),
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
-                             len(frame.dense), "" if estimate.accepted else "; ".join(reasons),
+                             len(frame.sampled), "" if estimate.accepted else "; ".join(reasons),
                              estimate.recovered, why_recovered, estimate.degenerate, estimate.signals.as_dict())
 
     def _failed(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate) -> list[str]:
@@ -252,7 +252,7 @@ class ScanAligner:
 
     def _held(self, stamp_ns: int, start: float, frame: Frame, reason: str) -> AlignmentStep:
         return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 0.0, False,
-                             time.perf_counter() - start, len(frame.dense), reason)
+                             time.perf_counter() - start, len(frame.sampled), reason)
 
     # -- pair mode ------------------------------------------------------------------------------------------
     def align_pair(self, source: np.ndarray, target: np.ndarray, stamp_ns: int, *, source_frame: str = "",

@@ -70,7 +70,7 @@ class PairMode:
         step = AlignmentStep(stamp_ns, pose.copy(), None if previous is None else np.linalg.inv(previous) @ pose,
                              estimate.published_covariance(self.config.health.covariance_inflation),
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
-                             len(frame.dense), "; ".join(estimate.failures + estimate.notes), estimate.recovered,
+                             len(frame.sampled), "; ".join(estimate.failures + estimate.notes), estimate.recovered,
                              why, estimate.degenerate, estimate.signals.as_dict())
         step.warnings = admitted.warnings + target_warnings
         return step

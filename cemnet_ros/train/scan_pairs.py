@@ -111,7 +111,7 @@ class ScanPairDataset(SeededPairs):
         """Scan ``index`` (m, sensor frame): a sector dropped, the CEM's points (as many as the node takes), noise."""
         cfg, n = self.preprocess, self.pairs.n_points
         partial = drop_sector(self.scans.clouds[index], rng, self.pairs.crop_deg, cfg.min_points)
-        near = near_points(partial, cfg.cem_radius * self.scans.scale, cfg.min_points)
+        near = near_points(partial, cfg, self.scans.scale)
         points = exactly(subsample(near, n, cfg.sampling, int(rng.integers(1 << 31))), n, rng)
         return points + rng.normal(0.0, self.pairs.noise, points.shape)
 

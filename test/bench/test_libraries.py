@@ -30,7 +30,7 @@ from cemnet_ros.bench.metrics import relative_error
 from cemnet_ros.bench.real import Sequence
 from cemnet_ros.core.geometry import apply_transform, rigid_transform
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.steps.frame import CemSubset, Frame
+from cemnet_ros.pipeline.steps.frame import Frame
 from cemnet_ros.pipeline.steps.preprocess import voxel_downsample
 
 VOXEL = 0.2
@@ -88,7 +88,7 @@ def test_a_stage_strides_over_the_polish_points_as_the_wide_polish_does():
 
 def test_polish_steps_place_the_map_in_the_last_map_scan_frame():
     poses = [_pose(k, 0.0, 10.0 * k) for k in range(5)]
-    frames = [Frame(np.full((4, 3), k), np.zeros((2, 3)), 1.0, 0.1, CemSubset(1.0, 2, "random", 0, 1))
+    frames = [Frame(np.full((4, 3), k), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3)), 1.0, 0.1)
               for k in range(5)]
     steps = polish_steps(frames, poses, map_scans=3, pairs=10)
     assert [s.index for s in steps] == [3, 4]

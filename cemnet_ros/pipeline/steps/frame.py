@@ -8,7 +8,6 @@ scan must not fix the units of the trajectory.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Optional
 
 import numpy as np
@@ -22,21 +21,9 @@ from cemnet_ros.pipeline.steps.preprocess import crop_range, finite_points, robu
 LOST_RESCALE_RATIO = 2.0  # a lost trajectory measures the auto scale again on a scan this much larger or smaller
 
 
-@dataclass(frozen=True)
-class CemSubset:
-    """How the CEM's points are drawn from a voxel cloud: ``count`` of those within ``radius`` m of the sensor."""
-
-    radius: float
-    count: int
-    method: str  # one of preprocess.SAMPLING_METHODS
-    seed: int
-    min_points: int  # fewer near points than this: all of the voxel cloud is near
-
-
 @dataclass
 class Frame:
-    """A preprocessed scan (sensor frame, metres): voxel cloud (map), polish subset and, made when first asked
-    for (a map restart or a pair target needs none), the CEM's subsets.
+    """A preprocessed scan (sensor frame, metres): voxel cloud (map), polish subset and CEM subset.
 
     The CEM sees points near the sensor only: its look-up lattices span the clouds' box, and far points make
     that box (and its cache misses) large for little information.
@@ -44,20 +31,11 @@ class Frame:
 
     dense: np.ndarray
     polish: np.ndarray
+    sampled: np.ndarray
+    near: np.ndarray  # the voxel points within the CEM's radius (the global search draws from them)
     scale: float  # metres per network unit this frame was prepared with
     voxel: float  # its voxel size (m); 0 = no voxel grid
-    cem: CemSubset
     _gicp: dict[float, GicpCloud] = field(default_factory=dict, repr=False, compare=False)
-
-    @cached_property
-    def near(self) -> np.ndarray:
-        """The voxel points within the CEM's radius (the global search draws from them)."""
-        return near_points(self.dense, self.cem.radius, self.cem.min_points)
-
-    @cached_property
-    def sampled(self) -> np.ndarray:
-        """The CEM's subset of :attr:`near`."""
-        return subsample(self.near, self.cem.count, self.cem.method, self.cem.seed)
 
     def gicp_cloud(self, voxel: float) -> GicpCloud:
         """The voxel cloud thinned to ``voxel`` with covariances, for the polish's wide stage (:mod:`.basin`);
@@ -118,10 +96,10 @@ def voxel_cloud(points_cropped: np.ndarray, config: PreprocessConfig, voxel: flo
     return dense
 
 
-def near_points(dense: np.ndarray, radius: float, min_points: int) -> np.ndarray:
-    """The voxel points within ``radius`` m of the sensor (all of them when fewer than ``min_points`` are)."""
-    near = dense[np.einsum("ij,ij->i", dense, dense) <= radius ** 2]
-    return near if len(near) >= min_points else dense
+def near_points(dense: np.ndarray, config: PreprocessConfig, scale: float) -> np.ndarray:
+    """The voxel points within the CEM's radius of the sensor (all of them when fewer than ``min_points`` are)."""
+    near = dense[np.einsum("ij,ij->i", dense, dense) <= (config.cem_radius * scale) ** 2]
+    return near if len(near) >= config.min_points else dense
 
 
 def network_units(scale: float, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -157,9 +135,10 @@ class Preprocessor:
             scale = measured_scale(kept)
         voxel = voxel_size(cfg, scale)
         dense = voxel_cloud(kept, cfg, voxel)
+        near = near_points(dense, cfg, scale)
         seed = max(self.config.registration.seed, 0)
-        cem = CemSubset(cfg.cem_radius * scale, self.config.registration.n_points, cfg.sampling, seed, cfg.min_points)
-        return Frame(dense, subsample(dense, self.config.polish.points, "random", seed), scale, voxel, cem)
+        return Frame(dense, subsample(dense, self.config.polish.points, "random", seed),
+                     subsample(near, self.config.registration.n_points, cfg.sampling, seed), near, scale, voxel)
 
     def adopt(self, frame: Frame) -> None:
         """The frame's units become the trajectory's (the first scan of a trajectory, a pair target)."""

@@ -38,7 +38,7 @@ class AlignmentStep:
     fitness: float
     accepted: bool
     latency_s: float
-    n_points: int  # points after preprocessing (the voxel cloud)
+    n_points: int
     reason: str = ""
     recovered: bool = False  # this step ran the global search
     recovery_reason: str = ""  # why it ran (first pair, stamp gap, tracking failed, requested)
