@@ -67,6 +67,9 @@ class TrackingConfig:
                                   low=1e-4)
     tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in fitness are a "
                              "near-tie: the one next to the prediction is kept, flagged", low=0.01, high=1.0)
+    local_first: bool = param(True, "polish the prediction first; the CEM samples only when that answer did not "
+                              "converge within the polish's reach or is not confirmed (false: the CEM on every "
+                              "step, as the method alone)")
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:

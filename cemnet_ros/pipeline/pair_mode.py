@@ -71,7 +71,8 @@ class PairMode:
                              estimate.published_covariance(self.config.health.covariance_inflation),
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
                              len(frame.sampled), "; ".join(estimate.failures + estimate.notes), estimate.recovered,
-                             why, estimate.degenerate, estimate.signals.as_dict())
+                             why, estimate.degenerate, estimate.signals.as_dict(),
+                             origin="" if estimate.failures else estimate.origin)
         step.warnings = admitted.warnings + target_warnings
         return step
 

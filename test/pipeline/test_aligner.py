@@ -15,6 +15,7 @@ from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig, ScanReject
 from cemnet_ros.pipeline.steps.preprocess import (
     robust_radius,
 )
+from cemnet_ros.pipeline.steps.tracking import Tracker
 
 FAST = AlignerConfig(registration=RegistrationConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0)))
 WORLD = make_world()
@@ -63,6 +64,45 @@ def test_sequential_tracking_follows_known_motion_and_the_spread_adapts():
         assert trans < 0.02 and rot < 0.1, (k, trans, rot)
         assert 0.5 < steps[k].fitness <= 1.0
     assert aligner._spread.spread()[1] < FAST.adaptive.initial_translation  # a good prediction narrows it
+
+
+def cem_calls_per_step(monkeypatch, aligner, poses):
+    """The steps of ``drive`` and how many times the tracking CEM sampled on each."""
+    calls = []
+    sample = Tracker._cem
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return sample(self, *args, **kwargs)
+
+    monkeypatch.setattr(Tracker, "_cem", counted)
+    rng = np.random.default_rng(2)
+    steps, counts = [], []
+    for k, pose in enumerate(poses):
+        before = len(calls)
+        steps.append(aligner.process(street_scan(WORLD, pose, rng), k * PERIOD))
+        counts.append(len(calls) - before)
+    return steps, counts
+
+
+def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_the_cem(monkeypatch):
+    aligner = ScanAligner(FAST)
+    poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
+    poses.append(poses[-1] @ make_transform(yaw=-0.06, t=(0.1, -0.4, 0.0)))  # the prediction is 0.6 m / 4.6 deg off
+    steps, cem_calls = cem_calls_per_step(monkeypatch, aligner, poses)
+    assert all(s.accepted for s in steps), [s.reason for s in steps]
+    assert cem_calls[3:6] == [0, 0, 0] and [s.origin for s in steps[3:6]] == ["prediction"] * 3
+    assert cem_calls[6] == 1, "a prediction beyond the polish's reach is sampled around"
+    for k in range(1, len(poses)):
+        assert within(*step_error(poses, steps, k), 0.02, 0.1), k
+
+
+def test_without_local_first_the_cem_samples_on_every_tracked_step(monkeypatch):
+    config = dataclasses.replace(FAST, tracking=TrackingConfig(local_first=False))
+    poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
+    steps, cem_calls = cem_calls_per_step(monkeypatch, ScanAligner(config), poses)
+    assert all(s.accepted for s in steps) and cem_calls[2:] == [1] * 4
+    assert all(s.origin == "cem" for s in steps[2:])
 
 
 def test_a_scan_of_another_place_is_flagged_and_the_prediction_published():

@@ -18,6 +18,7 @@ from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.basin import gicp
 from cemnet_ros.pipeline.steps.frame import Frame
+from cemnet_ros.pipeline.steps.health import disagreement
 from cemnet_ros.pipeline.steps.hypotheses import choose, distinct
 from cemnet_ros.pipeline.steps.refine import PolishResult, point_to_plane_icp
 from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
@@ -59,28 +60,34 @@ class Tracker:
     def track(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, dt_ratio: float,
               T_last: Optional[np.ndarray]) -> tuple[Estimate, list[Estimate]]:
         """The registration of ``frame`` near ``T_predicted`` (``T_last``: the last pose; ``dt_ratio``: this time
-        step over the usual one, which widens the spread).
+        step over the usual one, which widens the CEM's spread).
 
-        The CEM's answer, finely polished, stands when it is confirmed on its own (:meth:`_stands_alone`: the
-        usual step). Otherwise answers compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished
-        from afar, and, unless one of them stands on its own, the last pose (a stop, a jerk, a turn reversed: the
-        sensor did not move as it did). The fittest wins, near-ties go to the nearest (a direction the scene
-        hardly constrains stays at the prediction). Returns the chosen answer and all of them (the recovery's
-        rivals).
+        First the prediction, finely polished, as a local method would: it stands when the polish converged
+        within its own reach of the prediction (:meth:`_within_reach`: the prediction was already in the right
+        basin) and it is confirmed on its own (:meth:`_stands_alone`). Otherwise the CEM samples around the
+        prediction, and its answer, finely polished, stands on the same confirmation. Failing that, answers
+        compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished from afar, and, unless one of
+        them stands on its own, the last pose (a stop, a jerk, a turn reversed: the sensor did not move as it
+        did). The fittest wins, near-ties go to the nearest (a direction the scene hardly constrains stays at
+        the prediction). Returns the chosen answer and all of them (the recovery's rivals).
         """
         cfg = self.config
+        rotation, translation = self.spread.spread(dt_ratio)
+
+        def judged(polish: PolishResult, T_cem: np.ndarray, spread_m: float, origin: str) -> Estimate:
+            return self.judge.judge(frame, target_map, T_predicted, T_cem, polish, spread_m, recovered=False,
+                                    prediction_std=translation, origin=origin)
+
+        if cfg.tracking.local_first:
+            local = fine_polish(cfg, frame, target_map, T_predicted)
+            predicted = judged(local, T_predicted, 0.0, "prediction")
+            if self._within_reach(frame, T_predicted, local) and self._stands_alone(predicted):
+                return predicted, [predicted]
         target = map_sample(cfg, frame, target_map, T_predicted, cfg.registration.n_points)
         if len(target) < cfg.preprocess.min_points:
             return self.judge.off_map(frame, T_predicted, "prediction", 0.0), []
-        to_units, from_units = frame.network_units(target.mean(axis=0))
-        clouds = apply_transform(to_units, frame.sampled), apply_transform(to_units, target)
-        rotation, translation = self.spread.spread(dt_ratio)
-        sigma = (np.full(6, cfg.tracking.identity_sigma) if cfg.tracking.prior == "identity"
-                 else np.r_[np.full(3, rotation), np.full(3, translation / frame.scale)])
-        centre = {"motion": T_predicted, "identity": T_last, "network": None}[cfg.tracking.prior]
-        T_cem, spread_m = self._cem(frame, clouds, to_units, from_units, centre, sigma)
-        usual = self.judge.judge(frame, target_map, T_predicted, T_cem, fine_polish(cfg, frame, target_map, T_cem),
-                                 spread_m, recovered=False, prediction_std=translation, origin="cem")
+        T_cem, spread_m = self._cem(frame, target, T_predicted, T_last, rotation, translation)
+        usual = judged(fine_polish(cfg, frame, target_map, T_cem), T_cem, spread_m, "cem")
         if self._stands_alone(usual):
             return usual, [usual]
         starts: list[np.ndarray] = []
@@ -89,9 +96,7 @@ class Tracker:
         def compete(T_start: np.ndarray, origin: str) -> None:
             if all(distinct(T_start, kept) for kept in starts):
                 starts.append(T_start)
-                polish = wide_polish(cfg, frame, target_map, T_start)
-                estimates.append(self.judge.judge(frame, target_map, T_predicted, T_cem, polish, spread_m,
-                                                  recovered=False, prediction_std=translation, origin=origin))
+                estimates.append(judged(wide_polish(cfg, frame, target_map, T_start), T_cem, spread_m, origin))
 
         compete(T_cem, "cem")
         compete(T_predicted, "prediction")
@@ -114,12 +119,28 @@ class Tracker:
         return (not estimate.failures and health.level is not None
                 and not health.unconfirmed(estimate.signals.fitness, support=1))
 
-    def _cem(self, frame: Frame, clouds: tuple[np.ndarray, np.ndarray], to_units: np.ndarray,
-             from_units: np.ndarray, T_centre: Optional[np.ndarray], sigma: np.ndarray) -> tuple[np.ndarray, float]:
-        """The CEM in units around ``T_centre`` (None: the network's prior); (T_odom_sensor, final spread m)."""
+    def _within_reach(self, frame: Frame, T_predicted: np.ndarray, polish: PolishResult) -> bool:
+        """The polish from the prediction converged, and moved the points less than its pairing distance
+        (translation + lever arm x rotation): the prediction was in the basin the polish settled in, so no
+        other answer within the tracking spread needs sampling."""
+        if polish.iterations >= self.config.polish.iters:
+            return False
+        moved_m, moved_rad = disagreement(T_predicted, polish.T_target_source)
+        return moved_m + frame.length * moved_rad <= 2.0 * frame.polish_voxel
+
+    def _cem(self, frame: Frame, target: np.ndarray, T_predicted: np.ndarray, T_last: Optional[np.ndarray],
+             rotation: float, translation: float) -> tuple[np.ndarray, float]:
+        """The CEM in network units around the centre ``tracking.prior`` names (spread: the tracking spread, or
+        ``tracking.identity_sigma``) against the map sample ``target``; (T_odom_sensor, final spread m)."""
+        cfg = self.config
+        to_units, from_units = frame.network_units(target.mean(axis=0))
+        clouds = apply_transform(to_units, frame.sampled), apply_transform(to_units, target)
+        T_centre = {"motion": T_predicted, "identity": T_last, "network": None}[cfg.tracking.prior]
         if T_centre is None:
             result = self.registrar.register(*clouds)
         else:
+            sigma = (np.full(6, cfg.tracking.identity_sigma) if cfg.tracking.prior == "identity"
+                     else np.r_[np.full(3, rotation), np.full(3, translation / frame.scale)])
             result = self.registrar.register(*clouds, prior_pose=to_units @ T_centre @ from_units,
                                              prior_sigma=sigma)
         T_cem = from_units @ np.asarray(result.transform, dtype=np.float64) @ to_units

@@ -45,6 +45,7 @@ class AlignmentStep:
     degenerate: bool = False  # a direction was unconstrained: the prediction was kept along it
     signals: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)  # (kind, message) from the input checks (decimated, restarted)
+    origin: str = ""  # the start the published answer was polished from: prediction, cem, last pose, search
 
 
 @dataclass
