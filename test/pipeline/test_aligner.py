@@ -11,6 +11,7 @@ from cemnet_ros.core import CEMConfig, RegistrationConfig
 from cemnet_ros.data.street import make_transform, make_world, street_scan
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
+from cemnet_ros.pipeline.steps import tracking
 from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig, ScanRejected
 from cemnet_ros.pipeline.steps.preprocess import (
     robust_radius,
@@ -66,33 +67,39 @@ def test_sequential_tracking_follows_known_motion_and_the_spread_adapts():
     assert aligner._spread.spread()[1] < FAST.adaptive.initial_translation  # a good prediction narrows it
 
 
-def cem_calls_per_step(monkeypatch, aligner, poses):
-    """The steps of ``drive`` and how many times the tracking CEM sampled on each."""
-    calls = []
-    sample = Tracker._cem
+def sampled_and_competed(monkeypatch, aligner, poses):
+    """The steps of ``drive``, and on each whether the tracking CEM sampled and whether answers competed."""
+    calls: list[str] = []
+    sample, compete = Tracker._cem, tracking.choose
 
-    def counted(self, *args, **kwargs):
-        calls.append(1)
+    def sampled(self, *args, **kwargs):
+        calls.append("cem")
         return sample(self, *args, **kwargs)
 
-    monkeypatch.setattr(Tracker, "_cem", counted)
+    def competed(*args, **kwargs):
+        calls.append("choose")
+        return compete(*args, **kwargs)
+
+    monkeypatch.setattr(Tracker, "_cem", sampled)
+    monkeypatch.setattr(tracking, "choose", competed)
     rng = np.random.default_rng(2)
-    steps, counts = [], []
+    steps, events = [], []
     for k, pose in enumerate(poses):
         before = len(calls)
         steps.append(aligner.process(street_scan(WORLD, pose, rng), k * PERIOD))
-        counts.append(len(calls) - before)
-    return steps, counts
+        events.append(tuple(calls[before:]))
+    return steps, events
 
 
-def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_the_cem(monkeypatch):
+def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_competing_answers(monkeypatch):
     aligner = ScanAligner(FAST)
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
     poses.append(poses[-1] @ make_transform(yaw=-0.06, t=(0.1, -0.4, 0.0)))  # the prediction is 0.6 m / 4.6 deg off
-    steps, cem_calls = cem_calls_per_step(monkeypatch, aligner, poses)
+    steps, events = sampled_and_competed(monkeypatch, aligner, poses)
     assert all(s.accepted for s in steps), [s.reason for s in steps]
-    assert cem_calls[3:6] == [0, 0, 0] and [s.origin for s in steps[3:6]] == ["prediction"] * 3
-    assert cem_calls[6] == 1, "a prediction beyond the polish's reach is sampled around"
+    assert events[3:6] == [()] * 3 and [s.origin for s in steps[3:6]] == ["prediction"] * 3
+    # beyond the polish's reach the CEM samples, and its answer competes with the prediction's and the last pose's
+    assert events[6] == ("cem", "choose")
     for k in range(1, len(poses)):
         assert within(*step_error(poses, steps, k), 0.02, 0.1), k
 
@@ -100,8 +107,8 @@ def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_the_
 def test_without_local_first_the_cem_samples_on_every_tracked_step(monkeypatch):
     config = dataclasses.replace(FAST, tracking=TrackingConfig(local_first=False))
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
-    steps, cem_calls = cem_calls_per_step(monkeypatch, ScanAligner(config), poses)
-    assert all(s.accepted for s in steps) and cem_calls[2:] == [1] * 4
+    steps, events = sampled_and_competed(monkeypatch, ScanAligner(config), poses)
+    assert all(s.accepted for s in steps) and all(e[:1] == ("cem",) for e in events[2:])
     assert all(s.origin == "cem" for s in steps[2:])
 
 

@@ -65,11 +65,12 @@ class Tracker:
         First the prediction, finely polished, as a local method would: it stands when the polish converged
         within its own reach of the prediction (:meth:`_within_reach`: the prediction was already in the right
         basin) and it is confirmed on its own (:meth:`_stands_alone`). Otherwise the CEM samples around the
-        prediction, and its answer, finely polished, stands on the same confirmation. Failing that, answers
-        compete (:mod:`.hypotheses`): the CEM's and the prediction, each polished from afar, and, unless one of
-        them stands on its own, the last pose (a stop, a jerk, a turn reversed: the sensor did not move as it
-        did). The fittest wins, near-ties go to the nearest (a direction the scene hardly constrains stays at
-        the prediction). Returns the chosen answer and all of them (the recovery's rivals).
+        prediction; its answer, finely polished, stands on the same two terms. An answer beyond the polish's
+        reach of the prediction never stands alone: answers compete (:mod:`.hypotheses`), the CEM's and the
+        prediction, each polished from afar, and, unless one of them stands on its own, the last pose (a stop,
+        a jerk, a turn reversed: the sensor did not move as it did). The fittest wins, near-ties go to the
+        nearest (a direction the scene hardly constrains stays at the prediction). Returns the chosen answer and
+        all of them (the recovery's rivals).
         """
         cfg = self.config
         rotation, translation = self.spread.spread(dt_ratio)
@@ -87,8 +88,9 @@ class Tracker:
         if len(target) < cfg.preprocess.min_points:
             return self.judge.off_map(frame, T_predicted, "prediction", 0.0), []
         T_cem, spread_m = self._cem(frame, target, T_predicted, T_last, rotation, translation)
-        usual = judged(fine_polish(cfg, frame, target_map, T_cem), T_cem, spread_m, "cem")
-        if self._stands_alone(usual):
+        cem_polish = fine_polish(cfg, frame, target_map, T_cem)
+        usual = judged(cem_polish, T_cem, spread_m, "cem")
+        if self._stands_alone(usual) and self._within_reach(frame, T_predicted, cem_polish):
             return usual, [usual]
         starts: list[np.ndarray] = []
         estimates: list[Estimate] = []
@@ -120,9 +122,9 @@ class Tracker:
                 and not health.unconfirmed(estimate.signals.fitness, support=1))
 
     def _within_reach(self, frame: Frame, T_predicted: np.ndarray, polish: PolishResult) -> bool:
-        """The polish from the prediction converged, and moved the points less than its pairing distance
-        (translation + lever arm x rotation): the prediction was in the basin the polish settled in, so no
-        other answer within the tracking spread needs sampling."""
+        """``polish`` converged, and its answer lies within the polish's pairing distance of the prediction
+        (translation + lever arm x rotation): the prediction was in the basin the polish settled in, so the
+        prediction and the answer cannot be two rival hypotheses."""
         if polish.iterations >= self.config.polish.iters:
             return False
         moved_m, moved_rad = disagreement(T_predicted, polish.T_target_source)
