@@ -1,9 +1,11 @@
-"""Tracking (step 3 of the recipe in :mod:`..aligner`): the CEM around the motion prediction, then the polish.
+"""Tracking (step 3 of the recipe in :mod:`..aligner`): the polished prediction, else the CEM around it.
 
-The CEM registers the frame's CEM subset against a sample of the map near the predicted sensor position, in
-network units, with a spread that the recent prediction errors set (:class:`~.adaptive.AdaptiveSpread`). Its
-answer competes with the prediction and the last pose (:mod:`.hypotheses`); the point-to-plane polish against
-the map itself brings each to its precision. :func:`map_sample` and :func:`wide_polish` serve the recovery too.
+The prediction, finely polished against the map (point to plane), stands when the polish converged within its
+pairing distance of the prediction and the answer is confirmed: the way a local method tracks. Otherwise the CEM
+registers the frame's CEM subset against a sample of the map near the predicted sensor position, in network
+units, with a spread that the recent prediction errors set (:class:`~.adaptive.AdaptiveSpread`); an answer
+beyond the polish's reach of the prediction competes with the prediction and the last pose
+(:mod:`.hypotheses`). :func:`map_sample` and :func:`wide_polish` serve the recovery too.
 """
 from __future__ import annotations
 
@@ -62,13 +64,12 @@ class Tracker:
         """The registration of ``frame`` near ``T_predicted`` (``T_last``: the last pose; ``dt_ratio``: this time
         step over the usual one, which widens the CEM's spread).
 
-        First the prediction, finely polished, as a local method would: it stands when the polish converged
-        within its own reach of the prediction (:meth:`_within_reach`: the prediction was already in the right
-        basin) and it is confirmed on its own (:meth:`_stands_alone`). Otherwise the CEM samples around the
-        prediction; its answer, finely polished, stands on the same two terms. An answer beyond the polish's
-        reach of the prediction never stands alone: answers compete (:mod:`.hypotheses`), the CEM's and the
-        prediction, each polished from afar, and, unless one of them stands on its own, the last pose (a stop,
-        a jerk, a turn reversed: the sensor did not move as it did). The fittest wins, near-ties go to the
+        First the prediction, finely polished, as a local method would: it stands alone (:meth:`_stands_alone`)
+        when it is confirmed and the polish converged within its reach of the prediction (the prediction was
+        already in the right basin). Otherwise the CEM samples around the prediction; its answer, finely
+        polished, stands alone on the same terms. Failing that, answers compete (:mod:`.hypotheses`): the CEM's
+        and the prediction, each polished from afar, and, unless one of them stands alone, the last pose (a
+        stop, a jerk, a turn reversed: the sensor did not move as it did). The fittest wins, near-ties go to the
         nearest (a direction the scene hardly constrains stays at the prediction). Returns the chosen answer and
         all of them (the recovery's rivals).
         """
@@ -82,7 +83,7 @@ class Tracker:
         if cfg.tracking.local_first:
             local = fine_polish(cfg, frame, target_map, T_predicted)
             predicted = judged(local, T_predicted, 0.0, "prediction")
-            if self._within_reach(frame, T_predicted, local) and self._stands_alone(predicted):
+            if self._stands_alone(frame, T_predicted, predicted, local):
                 return predicted, [predicted]
         target = map_sample(cfg, frame, target_map, T_predicted, cfg.registration.n_points)
         if len(target) < cfg.preprocess.min_points:
@@ -90,19 +91,22 @@ class Tracker:
         T_cem, spread_m = self._cem(frame, target, T_predicted, T_last, rotation, translation)
         cem_polish = fine_polish(cfg, frame, target_map, T_cem)
         usual = judged(cem_polish, T_cem, spread_m, "cem")
-        if self._stands_alone(usual) and self._within_reach(frame, T_predicted, cem_polish):
+        if self._stands_alone(frame, T_predicted, usual, cem_polish):
             return usual, [usual]
         starts: list[np.ndarray] = []
         estimates: list[Estimate] = []
+        standing: list[bool] = []
 
         def compete(T_start: np.ndarray, origin: str) -> None:
             if all(distinct(T_start, kept) for kept in starts):
                 starts.append(T_start)
-                estimates.append(judged(wide_polish(cfg, frame, target_map, T_start), T_cem, spread_m, origin))
+                polish = wide_polish(cfg, frame, target_map, T_start)
+                estimates.append(judged(polish, T_cem, spread_m, origin))
+                standing.append(self._stands_alone(frame, T_predicted, estimates[-1], polish))
 
         compete(T_cem, "cem")
         compete(T_predicted, "prediction")
-        if T_last is not None and not any(self._stands_alone(e) for e in estimates):
+        if T_last is not None and not any(standing):
             compete(T_last, "last pose")
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
         return choose(estimates, T_predicted, cfg.tracking.tie_ratio, near), estimates
@@ -115,11 +119,14 @@ class Tracker:
         why = self.judge.health.unconfirmed(estimate.signals.fitness, estimate.support, after_gap)
         return [why] if why else []
 
-    def _stands_alone(self, estimate: Estimate) -> bool:
-        """No failure, and confirmed without a second start (at ``health.confirm_ratio`` x the running level)."""
+    def _stands_alone(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate, polish: PolishResult) -> bool:
+        """No failure, confirmed without a second start (at ``health.confirm_ratio`` x the running level), and
+        within the polish's reach of the prediction (:meth:`_within_reach`): fitness alone does not tell a
+        wrong basin from the right one, so an answer the prediction does not explain needs rivals."""
         health = self.judge.health
         return (not estimate.failures and health.level is not None
-                and not health.unconfirmed(estimate.signals.fitness, support=1))
+                and not health.unconfirmed(estimate.signals.fitness, support=1)
+                and self._within_reach(frame, T_predicted, polish))
 
     def _within_reach(self, frame: Frame, T_predicted: np.ndarray, polish: PolishResult) -> bool:
         """``polish`` converged, and its answer lies within the polish's pairing distance of the prediction
