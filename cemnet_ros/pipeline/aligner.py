@@ -211,7 +211,7 @@ class ScanAligner:
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
                              len(frame.sampled), "" if estimate.accepted else "; ".join(reasons),
                              estimate.recovered, why_recovered, estimate.degenerate, estimate.signals.as_dict(),
-                             origin="" if estimate.failures else estimate.origin)
+                             origin=estimate.published_origin)
 
     def _failed(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate) -> list[str]:
         """A step that cannot be vouched for: the next scan recovers; too many in a row restart the map."""

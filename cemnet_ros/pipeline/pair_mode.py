@@ -72,7 +72,7 @@ class PairMode:
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
                              len(frame.sampled), "; ".join(estimate.failures + estimate.notes), estimate.recovered,
                              why, estimate.degenerate, estimate.signals.as_dict(),
-                             origin="" if estimate.failures else estimate.origin)
+                             origin=estimate.published_origin)
         step.warnings = admitted.warnings + target_warnings
         return step
 

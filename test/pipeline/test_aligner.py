@@ -70,25 +70,27 @@ def test_sequential_tracking_follows_known_motion_and_the_spread_adapts():
 def sampled_and_competed(monkeypatch, aligner, poses):
     """The steps of ``drive``, and on each whether the tracking CEM sampled and whether answers competed."""
     calls: list[str] = []
-    sample, compete = Tracker._cem, tracking.choose
 
-    def sampled(self, *args, **kwargs):
-        calls.append("cem")
-        return sample(self, *args, **kwargs)
+    def counted(owner, name, event):
+        original = getattr(owner, name)
 
-    def competed(*args, **kwargs):
-        calls.append("choose")
-        return compete(*args, **kwargs)
+        def wrapper(*args, **kwargs):
+            calls.append(event)
+            return original(*args, **kwargs)
 
-    monkeypatch.setattr(Tracker, "_cem", sampled)
-    monkeypatch.setattr(tracking, "choose", competed)
-    rng = np.random.default_rng(2)
-    steps, events = [], []
-    for k, pose in enumerate(poses):
-        before = len(calls)
-        steps.append(aligner.process(street_scan(WORLD, pose, rng), k * PERIOD))
-        events.append(tuple(calls[before:]))
-    return steps, events
+        monkeypatch.setattr(owner, name, wrapper)
+
+    counted(Tracker, "_cem", "cem")
+    counted(tracking, "choose", "choose")
+    counted(aligner, "process", "scan")
+    steps = drive(aligner, poses)
+    events: list[list[str]] = []
+    for call in calls:
+        if call == "scan":
+            events.append([])
+        else:
+            events[-1].append(call)
+    return steps, [tuple(e) for e in events]
 
 
 def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_competing_answers(monkeypatch):

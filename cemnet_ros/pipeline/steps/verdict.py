@@ -82,6 +82,11 @@ class Estimate:
         """The covariance as published: inflated when the step failed."""
         return self.covariance * inflation if self.failures else self.covariance
 
+    @property
+    def published_origin(self) -> str:
+        """The start of the published answer: none when the step failed (the prediction is published)."""
+        return "" if self.failures else self.origin
+
 
 class StepJudge:
     """Signals of one registration against the map, its failures, degeneracy and covariance."""
