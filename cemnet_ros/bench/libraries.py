@@ -155,7 +155,7 @@ def polish_stages(config: AlignerConfig, voxel: float) -> list[Stage]:
     """A two-stage point-to-plane polish from a start that may be a metre or degrees off, the schedule compared
     with the libraries' ICPs: a wide pairing on a subset finds the basin, the fine pairing on every polish point
     brings the precision (the node's own wide stage is small_gicp's GICP, :mod:`cemnet_ros.pipeline.basin`)."""
-    return [Stage(WIDE_POINTS, config.recovery.polish_distance * voxel, config.recovery.polish_iters),
+    return [Stage(WIDE_POINTS, config.polish.wide_distance * voxel, config.polish.wide_iters),
             Stage(config.polish.points, FINE_DISTANCE_VOXELS * voxel, config.polish.iters)]
 
 

@@ -9,7 +9,7 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
 3. **track** (:mod:`.steps.tracking`): the prediction polished point to plane against the map, standing when
    the polish stayed within its reach and the answer is confirmed; else the CEM around the prediction against
    a sample of the map, then the polish; an answer beyond the polish's reach of the prediction competes with
-   the prediction and the last pose, each polished from afar (:mod:`.steps.hypotheses`);
+   the prediction and the last pose, each polished from afar (:mod:`.steps.contest`);
 4. **judge** the step without ground truth (:mod:`.steps.verdict`: fitness in metres, confirmation,
    conditioning);
 5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit
@@ -39,6 +39,7 @@ from cemnet_ros.pipeline.pair_mode import PairMode
 from cemnet_ros.pipeline.steps import preprocess, refine
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.basin import GicpCloud
+from cemnet_ros.pipeline.steps.contest import Contest
 from cemnet_ros.pipeline.steps.covariance import flat_covariance
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
 from cemnet_ros.pipeline.steps.health import HealthMonitor
@@ -67,7 +68,7 @@ class ScanAligner:
         self._health = HealthMonitor(self.config.health)
         judge = StepJudge(self.config, self._health)
         self._tracker = Tracker(self.config, registrar, self._spread, judge)
-        self._recovery = Recovery(self.config, self._spread, judge, prior_registrar(self.config, recovery_prior))
+        self._recovery = Recovery(self.config, judge, prior_registrar(self.config, recovery_prior))
         self._sweep = SweepDeskewer(self.config.preprocess.deskew, self._preprocessor)
         self._pairs = PairMode(self.config, self._preprocessor, self._checks, self._tracker, self._recovery)
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
@@ -118,14 +119,15 @@ class ScanAligner:
 
     # -- sequential mode ------------------------------------------------------------------------------------
     def process(self, points: np.ndarray, stamp_ns: int, point_times: Optional[np.ndarray] = None,
-                frame_id: str = "", now_ns: Optional[int] = None) -> AlignmentStep:
+                frame_id: str = "", now_ns: Optional[int] = None, effort: float = 1.0) -> AlignmentStep:
         """Register this scan against the local map and accumulate the pose.
 
         The scan first passes the input checks (:mod:`.steps.input_checks`: its non-finite points are dropped;
         ``now_ns``: the caller's clock for the future-stamp check); a rejected one raises ScanRejected and
         changes nothing. ``point_times``: each point's time (s, relative to
         ``stamp_ns``, aligned with ``points``); with ``config.preprocess.deskew`` the scan is first deskewed
-        (:mod:`.steps.sweep`). The pose is the one at ``stamp_ns`` in any case.
+        (:mod:`.steps.sweep`). The pose is the one at ``stamp_ns`` in any case. ``effort`` (0, 1] scales the
+        polishes' and the global search's budgets (a live node behind its input; offline replays use 1).
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
         admitted = self._checks.admit(points, point_times, stamp_ns, frame_id, now_ns)
@@ -134,14 +136,14 @@ class ScanAligner:
         points, offset_ns, self._map = self._sweep.deskewed(admitted.points, admitted.times, stamp_ns,
                                                             self._velocity, self._last_stamp, self._map)
         before = self._last_stamp
-        step = self._process_at(points, stamp_ns + offset_ns, start)
+        step = self._process_at(points, stamp_ns + offset_ns, start, effort)
         self._checks.passed(admitted)
         if before is not None and self._last_stamp is not None and self._last_stamp != before:
             self._last_dt_ns = self._last_stamp - before  # the motion model's last time step
         step.warnings = admitted.warnings
         return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._velocity, self._motion.has_velocity)
 
-    def _process_at(self, points: np.ndarray, stamp_ns: int, start: float) -> AlignmentStep:
+    def _process_at(self, points: np.ndarray, stamp_ns: int, start: float, effort: float) -> AlignmentStep:
         """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :mod:`.steps.sweep`)."""
         frame = self._preprocessor.frame(points)
         if self._last_stamp is not None and stamp_ns == self._last_stamp:
@@ -150,18 +152,18 @@ class ScanAligner:
             return self._start_trajectory(frame, stamp_ns, start)
         dt_ns = stamp_ns - self._last_stamp
         T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
-        why = self._pending_recovery
-        answers: list[Estimate] = []
-        if not why:
-            estimate, answers = self._tracker.track(frame, self._map, T_predicted, self._dt_ratio(dt_ns),
-                                                    self._motion.last_pose)
+        why, dt_ratio = self._pending_recovery, self._dt_ratio(dt_ns)
+        if why:
+            contest = self._tracker.contest(frame, self._map, T_predicted, dt_ratio, effort)
+        else:
+            estimate, contest = self._tracker.track(frame, self._map, T_predicted, dt_ratio, self._motion.last_pose,
+                                                    effort)
             doubts = self._tracker.doubts(estimate, after_gap=dt_ns * 1e-9 > self.config.recovery.gap)
             if not doubts:
-                return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, "", start)
+                return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, "", start, contest)
             why = "tracking failed (" + "; ".join(doubts) + ")"
-        estimate = self._recovery.recover(frame, self._map, T_predicted, self._T_odom_last_insert, self._pose,
-                                          answers)
-        return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, why, start)
+        estimate = self._recovery.recover(frame, self._map, contest, self._T_odom_last_insert, self._pose)
+        return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, why, start, contest)
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
         """The first scan (or one whose stamp went back): the map restarts from it, the pose is kept."""
@@ -193,7 +195,7 @@ class ScanAligner:
         return 1.0 if not self._period_ns else dt_ns / self._period_ns
 
     def _commit(self, frame: Frame, stamp_ns: int, dt_ns: int, T_predicted: np.ndarray, estimate: Estimate,
-                why_recovered: str, start: float) -> AlignmentStep:
+                why_recovered: str, start: float, contest: Contest) -> AlignmentStep:
         """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
         previous = self._pose
         if estimate.failures:
@@ -211,7 +213,8 @@ class ScanAligner:
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
                              len(frame.sampled), "" if estimate.accepted else "; ".join(reasons),
                              estimate.recovered, why_recovered, estimate.degenerate, estimate.signals.as_dict(),
-                             origin=estimate.published_origin)
+                             origin=estimate.published_origin, effort=contest.polisher.effort,
+                             polishes=contest.polishes)
 
     def _failed(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate) -> list[str]:
         """A step that cannot be vouched for: the next scan recovers; too many in a row restart the map."""

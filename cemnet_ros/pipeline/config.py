@@ -67,9 +67,8 @@ class TrackingConfig:
                                   low=1e-4)
     tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in fitness are a "
                              "near-tie: the one next to the prediction is kept, flagged", low=0.01, high=1.0)
-    local_first: bool = param(True, "polish the prediction first; the CEM samples only when that answer did not "
-                              "converge within the polish's reach or is not confirmed (false: the CEM on every "
-                              "step, as the method alone)")
+    local_first: bool = param(True, "polish the prediction first; the CEM samples only when that answer does not "
+                              "stand (false: the CEM on every step, as the method alone)")
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:
@@ -95,6 +94,11 @@ class PolishConfig:
     iters: int = param(20, "point-to-plane polish iterations (at most: it stops once a step moves less than "
                        "0.1 mm and 0.1 mrad)", low=1)
     points: int = param(3000, "source points the polish uses at most (a seeded subset of the voxel cloud)", low=10)
+    coarse_stride: int = param(3, "the polish's first steps use every this-many-th point, the last ones and the "
+                               "Hessian all (1 = all throughout)", low=1)
+    wide_distance: float = param(6.0, "pairing distance of the wide polish's basin stage, GICP against the map's "
+                                 "last scan (frame voxels)", low=0.1)
+    wide_iters: int = param(60, "its iterations at most (a start can be degrees off)", low=1)
     inlier_distance: float = param(2.0, "a point with a map point this close (frame voxels) ...", low=1e-3)
     inlier_residual: float = param(0.05, "... and within this of its plane (m; the sensor's noise, not the "
                                    "scene's size) counts for the fitness", low=1e-4)
@@ -113,8 +117,6 @@ class RecoveryConfig:
                        "health.confirm_ratio x the running level, or the global search competes with it", low=1e-3)
     ambiguity_ratio: float = param(0.95, "a distinct hypothesis this close in fitness makes the answer ambiguous",
                                    low=0.01, high=1.0)
-    polish_distance: float = param(6.0, "first pairing distance of a hypothesis' polish (frame voxels)", low=0.1)
-    polish_iters: int = param(60, "its iterations at that distance (a hypothesis can be degrees off)", low=1)
     restart_after: int = param(3, "consecutive failed steps after which the map restarts from the scan (lost)",
                                low=1)
     prior: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_prior "
@@ -127,10 +129,10 @@ class RecoveryConfig:
     def __post_init__(self) -> None:
         if self.prior not in RECOVERY_PRIORS:
             raise ValueError(f"recovery prior must be one of {RECOVERY_PRIORS}, not {self.prior!r}")
-        if self.radius < 0 or self.gap <= 0 or self.polish_distance <= 0:
-            raise ValueError("recovery radius must be >= 0, gap and polish_distance > 0")
-        if self.points < 32 or self.restart_after < 1 or self.polish_iters < 1:
-            raise ValueError("recovery points must be >= 32, restart_after and polish_iters >= 1")
+        if self.radius < 0 or self.gap <= 0:
+            raise ValueError("recovery radius must be >= 0, gap > 0")
+        if self.points < 32 or self.restart_after < 1:
+            raise ValueError("recovery points must be >= 32, restart_after >= 1")
         if not 0.0 < self.ambiguity_ratio <= 1.0:
             raise ValueError("ambiguity_ratio must lie in (0, 1]")
 

@@ -79,14 +79,15 @@ class PairMode:
     def _register(self, frame: Frame, target_map: VoxelMap, stamp_ns: int) -> tuple[str, Estimate]:
         """(why the global search ran, or "", the estimate): tracking from the prediction, else the search."""
         if self._motion.last_pose is None:
-            return "no pose yet", self.recovery.recover(frame, target_map, np.eye(4))
+            return "no pose yet", self.recovery.recover(frame, target_map, self.tracker.contest(frame, target_map,
+                                                                                                 np.eye(4)))
         T_predicted = self._motion.predict(stamp_ns)
-        estimate, answers = self.tracker.track(frame, target_map, T_predicted, 1.0, self._motion.last_pose)
+        estimate, contest = self.tracker.track(frame, target_map, T_predicted, 1.0, self._motion.last_pose)
         doubts = self.tracker.doubts(estimate)
         if not doubts:
             return "", estimate
         why = "tracking failed (" + "; ".join(doubts) + ")"
-        return why, self.recovery.recover(frame, target_map, T_predicted, rivals=answers)
+        return why, self.recovery.recover(frame, target_map, contest)
 
     def _target_map(self, target: np.ndarray, frame_id: str, stamp_ns: int, now_ns: Optional[int]
                     ) -> tuple[VoxelMap, list]:

@@ -72,6 +72,13 @@ def format_report(bag: str, summary: dict, max_pairs: int = 20, worst: int = 10)
     sp = summary["speed"]
     lines.append(f"latency p50 {sp['latency_p50_s'] * 1e3:.0f} ms, p95 {sp['latency_p95_s'] * 1e3:.0f} ms; "
                  f"throughput {sp['throughput_scans_per_s']:.2f} scans/s (wall {sp['wall_s']:.1f} s)")
+    live = summary.get("live")
+    if live:
+        lines.append(f"live at {live['rate']:g}x the bag's timing (queue of {live['queue_size']}): "
+                     f"{live['processed']} of {live['scans']} scans processed, {live['dropped']} dropped, "
+                     f"{live['behind']} started behind (effort {live['behind_effort']:g}); latency p50 "
+                     f"{live['latency_ms_p50']:.0f} ms, p95 {live['latency_ms_p95']:.0f} ms, "
+                     f"p99 {live['latency_ms_p99']:.0f} ms")
     lines.append(skipped_line(summary["skipped"], summary["messages"]))
     lines.append(f"rejected scans: {len(summary['rejected'])}; flagged steps: {len(summary['flagged'])}")
     lines += [f"  scan {r['index']}: {r['reason']}" for r in summary["rejected"] + summary["flagged"]]

@@ -159,7 +159,8 @@ class AlignNode(Node):
         scan = self._decode(item)
         frame_id = scan.msg.header.frame_id
         self._sensor_extrinsic(frame_id)
-        return self._session.process(scan, frame_id, self._now_ns()), scan, self._cfg.odom_frame
+        return (self._session.process(scan, frame_id, self._now_ns(), self._worker.stats().depth), scan,
+                self._cfg.odom_frame)
 
     def _pair(self, source_item: Incoming, target_item: Incoming) -> tuple[StepResult, Scan, str]:
         if self._target is None or self._target[0] is not target_item:  # a latched target is decoded once

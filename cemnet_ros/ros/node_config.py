@@ -41,6 +41,8 @@ class NodeConfig:
     qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
     queue_size: int = param(8, "scans waiting for the worker (8 absorb a global search at 20 Hz); when full the "
                             "oldest is dropped", low=1, high=100)
+    behind_effort: float = param(0.5, "share of the polishes' and the global search's budgets a scan gets while "
+                                 "newer scans wait (1 = the same as offline)", low=0.05, high=1.0)
     covariance_mode: str = param("registration", "'registration': from the polish's Hessian (docs/node.md); "
                                  "'fixed': the fixed variances below", choices=COVARIANCE_MODES)
     fixed_position_variance: float = param(0.01, "covariance_mode fixed: x, y, z variance (m^2) per step",

@@ -30,6 +30,7 @@ from cemnet_ros.io.atomic import write_report
 from cemnet_ros.io.report import Report
 from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
 from cemnet_ros.replay.bag_io import BagError, BagReader
+from cemnet_ros.replay.realtime import live_summary
 from cemnet_ros.replay.report import evaluate, format_report, skipped_line, speed
 from cemnet_ros.replay.runner import ODOM_TOPIC, ReplayResult, copied_topics, output_topics, run_replay
 from cemnet_ros.replay.trajectory import write_tum
@@ -88,6 +89,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     p.add_argument("--config", type=Path, default=None, help="parameter YAML (e.g. config/align_node.yaml); "
                                                              "the options below override it")
     p.add_argument("--limit", type=int, default=None, help="process only the first N scans")
+    p.add_argument("--realtime", type=float, default=None, metavar="RATE",
+                   help="play the scans into the node's queue at RATE x the bag's timing, as a live node would "
+                        "receive them (drops, latency, behind_effort); default: every scan, full effort")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_arguments(p, NODE, "align_node's output parameters (frames, extrinsic, covariances, /tf, aligned cloud; "
@@ -96,6 +100,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.limit is not None and args.limit < 1:
         p.error("--limit must be >= 1")
+    if args.realtime is not None and not args.realtime > 0:
+        p.error("--realtime must be > 0")
     return args
 
 
@@ -112,6 +118,7 @@ class ReplayConfig:
     limit: Optional[int] = None
     plot: bool = True
     progress: bool = True
+    realtime: Optional[float] = None  # RATE: played into the node's queue at RATE x the bag's timing
 
 
 @dataclass
@@ -147,7 +154,7 @@ def configure(args: argparse.Namespace) -> ReplayConfig:
         raise ValueError(f"bad configuration: {err}") from err
     out = args.out or Path("results") / "replay" / args.bag.name.split(".")[0]
     return ReplayConfig(args.bag, out, pipeline, node, args.topic, args.gt_topic, args.limit, not args.no_plot,
-                        not args.quiet)
+                        not args.quiet, args.realtime)
 
 
 def write_outputs(config: ReplayConfig, result: ReplayResult, acc: Optional[dict],
@@ -186,6 +193,8 @@ def build_summary(config: ReplayConfig, facts: dict[str, Any], result: ReplayRes
         "skipped": [s.as_dict() for s in result.skipped], "rejected": result.rejected,
         "flagged": [{"index": s["index"], "reason": s["reason"]} for s in result.steps
                     if not s["accepted"] or s["reason"]],
+        "live": None if result.live is None else {"rate": config.realtime, "queue_size": node.queue_size,
+                                                  "behind_effort": node.behind_effort, **live_summary(result.live)},
         "steps": result.steps, "config": asdict(config.pipeline), "node_config": {k: getattr(node, k) for k in NODE},
         "outputs": files,
     }
@@ -201,7 +210,7 @@ def replay(config: ReplayConfig) -> tuple[ReplayResult, dict[str, Any], tuple[np
         aligner = ScanAligner(config.pipeline)
         config.out.mkdir(parents=True, exist_ok=True)
         result = run_replay(reader, aligner, config.out / "replay.mcap", config.limit, progress=config.progress,
-                            node=config.node)
+                            node=config.node, realtime=config.realtime)
         facts = {"info": reader.info, "gt_frame": gt_frame, "copies": copies,
                  "scale": float(aligner.scale or float("nan"))}
     return result, facts, (gt_stamps, gt_poses)

@@ -11,7 +11,7 @@ from cemnet_ros.core import CEMConfig, RegistrationConfig
 from cemnet_ros.data.street import make_transform, make_world, street_scan
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
-from cemnet_ros.pipeline.steps import tracking
+from cemnet_ros.pipeline.steps.contest import Contest
 from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig, ScanRejected
 from cemnet_ros.pipeline.steps.preprocess import (
     robust_radius,
@@ -81,7 +81,7 @@ def sampled_and_competed(monkeypatch, aligner, poses):
         monkeypatch.setattr(owner, name, wrapper)
 
     counted(Tracker, "_cem", "cem")
-    counted(tracking, "choose", "choose")
+    counted(Contest, "choose", "choose")
     counted(aligner, "process", "scan")
     steps = drive(aligner, poses)
     events: list[list[str]] = []
@@ -99,9 +99,11 @@ def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_comp
     poses.append(poses[-1] @ make_transform(yaw=-0.06, t=(0.1, -0.4, 0.0)))  # the prediction is 0.6 m / 4.6 deg off
     steps, events = sampled_and_competed(monkeypatch, aligner, poses)
     assert all(s.accepted for s in steps), [s.reason for s in steps]
-    assert events[3:6] == [()] * 3 and [s.origin for s in steps[3:6]] == ["prediction"] * 3
-    # beyond the polish's reach the CEM samples, and its answer competes with the prediction's and the last pose's
-    assert events[6] == ("cem", "choose")
+    # a steady drive: the polished prediction stands, one polish a scan
+    assert events[3:6] == [()] * 3 and [(s.origin, s.polishes) for s in steps[3:6]] == [("prediction", 1)] * 3
+    # the jerk is beyond the polish's reach and the prediction's spread: the CEM samples, and the answer competes
+    # with the last pose's (their wide polishes land in one basin: one polish, support from every start)
+    assert events[6] == ("cem", "choose") and steps[6].polishes >= 1
     for k in range(1, len(poses)):
         assert within(*step_error(poses, steps, k), 0.02, 0.1), k
 

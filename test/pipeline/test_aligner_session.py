@@ -32,8 +32,8 @@ class FakeAligner:
     def request_recovery(self):
         self.calls.append(("recovery",))
 
-    def process(self, points, stamp_ns, times, *, frame_id, now_ns):
-        self.calls.append(("process", stamp_ns, frame_id, now_ns))
+    def process(self, points, stamp_ns, times, *, frame_id, now_ns, effort):
+        self.calls.append(("process", stamp_ns, frame_id, now_ns, effort))
         relative = np.linalg.inv(self.pose) @ (self.pose @ MOTION)
         self.pose = self.pose @ MOTION
         return SimpleNamespace(stamp_ns=stamp_ns, pose=self.pose.copy(), relative=relative, accepted=True,
@@ -75,12 +75,22 @@ def test_steps_publish_the_base_motion_with_the_twist_over_the_stamp_gap():
     first = session.process(_scan(1_000_000_000), "lidar", 5)
     session.begin_scan()
     second = session.process(_scan(1_100_000_000), "lidar", 6)
-    assert session.scale == 0.25 and session._aligner.calls[0] == ("process", 1_000_000_000, "lidar", 5)
+    assert session.scale == 0.25 and session._aligner.calls[0] == ("process", 1_000_000_000, "lidar", 5, 1.0)
     assert first.out.twist_known is False and second.out.twist_known
     base_motion = T_BASE_SENSOR @ MOTION @ np.linalg.inv(T_BASE_SENSOR)
     np.testing.assert_allclose(second.out.linear, base_motion[:3, 3] / 0.1, atol=1e-9)
     np.testing.assert_allclose(second.T_odom_sensor, second.out.T_odom_base @ T_BASE_SENSOR, atol=1e-12)
     np.testing.assert_allclose(second.out.T_odom_base, base_motion @ base_motion, atol=1e-9)
+
+
+def test_a_scan_that_starts_behind_newer_ones_gets_the_behind_effort():
+    session = _session()
+    session.load()
+    for stamp_ns, backlog in ((1_000_000_000, 0), (1_100_000_000, 3), (1_200_000_000, 0)):
+        session.begin_scan()
+        session.process(_scan(stamp_ns), "lidar", None, backlog)
+    efforts = [call[-1] for call in session._aligner.calls]
+    assert efforts == [1.0, NodeConfig().behind_effort, 1.0] and NodeConfig().behind_effort < 1.0
 
 
 def test_requests_wait_for_the_next_scan_and_set_pose_waits_for_the_aligner():

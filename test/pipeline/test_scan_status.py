@@ -23,7 +23,7 @@ def _scan_status():
 def _step(accepted=True, warnings=()):
     return SimpleNamespace(stamp_ns=2_500_000_000, accepted=accepted, reason="" if accepted else "low fitness",
                            fitness=0.812345, recovered=False, warnings=list(warnings), recovery_reason="",
-                           degenerate=False, origin="prediction" if accepted else "")
+                           degenerate=False, origin="prediction" if accepted else "", effort=0.5, polishes=2)
 
 
 def test_warnings_are_throttled_per_kind_not_per_call_site():
@@ -55,8 +55,8 @@ def test_steps_are_ok_or_flagged_and_carry_their_input_warnings():
     scan_status, _ = _scan_status()
     good = scan_status.step(_step(warnings=[("decimated", "kept 1 in 2")]))
     assert (good.verdict.level, good.verdict.message, good.verdict.stamp_ns) == (OK, "ok", 2_500_000_000)
-    assert good.verdict.values == {"fitness": 0.8123, "recovered": False, "origin": "prediction",
-                                   "warnings": "[decimated] kept 1 in 2"}
+    assert good.verdict.values == {"fitness": 0.8123, "recovered": False, "origin": "prediction", "effort": 0.5,
+                                   "polishes": 2, "warnings": "[decimated] kept 1 in 2"}
     assert good.warnings == ["[decimated] kept 1 in 2 (1 so far)"]
     flagged = scan_status.step(_step(accepted=False))
     assert (flagged.verdict.level, flagged.verdict.message) == (WARN, "low fitness")

@@ -39,8 +39,8 @@ def _scan_aligner(config: AlignerConfig) -> Any:
 class AlignerSession:
     """A ScanAligner as the node drives it from several threads.
 
-    ``output_config``: the node's covariance settings (a NodeConfig); ``make_aligner``: builds the aligner from
-    ``config`` (default: a ScanAligner).
+    ``output_config``: the node's covariance and effort settings (a NodeConfig); ``make_aligner``: builds the
+    aligner from ``config`` (default: a ScanAligner).
     """
 
     def __init__(self, config: AlignerConfig, output_config: Any, base: BaseFrame,
@@ -105,10 +105,13 @@ class AlignerSession:
         if "relocalize" in requests:
             self._aligner.request_recovery()
 
-    def process(self, scan: Any, frame_id: str, now_ns: Optional[int]) -> StepResult:
-        """Sequential mode: register a decoded scan (points, stamp_ns, times) against the map."""
+    def process(self, scan: Any, frame_id: str, now_ns: Optional[int], backlog: int = 0) -> StepResult:
+        """Sequential mode: register a decoded scan (points, stamp_ns, times) against the map; ``backlog``: newer
+        scans waiting (while behind, a scan gets ``behind_effort`` of the budgets)."""
+        effort = 1.0 if backlog <= 0 else self._output_config.behind_effort
         with self._map_lock:
-            step = self._aligner.process(scan.points, scan.stamp_ns, scan.times, frame_id=frame_id, now_ns=now_ns)
+            step = self._aligner.process(scan.points, scan.stamp_ns, scan.times, frame_id=frame_id, now_ns=now_ns,
+                                         effort=effort)
         return self._result(step)
 
     def align_pair(self, source: Any, target: Any, source_frame: str, target_frame: str,

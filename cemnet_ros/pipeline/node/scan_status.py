@@ -85,6 +85,7 @@ class ScanStatus:
         if not step.accepted:
             lines += self.throttled("flagged", f"step at {step.stamp_ns * 1e-9:.3f} s flagged: {step.reason}")
         values = {"fitness": round(step.fitness, 4), "recovered": step.recovered, "origin": step.origin,
+                  "effort": step.effort, "polishes": step.polishes,
                   "warnings": "; ".join(f"[{kind}] {text}" for kind, text in step.warnings)}
         return Outcome(ScanVerdict(step.stamp_ns, OK if step.accepted else WARN, step.reason or "ok", values), lines)
 

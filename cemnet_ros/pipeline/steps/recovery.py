@@ -3,29 +3,31 @@
 It runs on the first pair, when tracking failed or is unconfirmed, or on request: the search
 (:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation; with
 ``recovery.prior`` 'network' also candidates drawn from the sampling network's prior) returns distinct
-hypotheses; each one close to the best in fitness is polished and judged. The guess itself (the motion
-prediction) and the last pose are polished too and compete with them (:mod:`.hypotheses`): a distant hypothesis
-never replaces a near answer of similar fitness, and distinct near-ties keep a symmetric scene from being
-published as a confident answer.
+hypotheses; each one close to the best in fitness enters tracking's contest (:mod:`.contest`), polished wide.
+Without tracking's answers the guess itself (the motion prediction) and the last pose compete too: a distant
+hypothesis never replaces a near answer of similar fitness, and distinct near-ties keep a symmetric scene from
+being published as a confident answer.
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+import dataclasses
+from typing import Optional
 
 import numpy as np
 import torch
 
 from cemnet_ros.core import Registrar, RegistrationConfig
+from cemnet_ros.core.config import GlobalSearchConfig
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.core.global_search import SearchPrior, global_search
 from cemnet_ros.core.registration import NETWORK_MIN_POINTS
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
-from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.steps.contest import Contest, Origin
 from cemnet_ros.pipeline.steps.frame import Frame
-from cemnet_ros.pipeline.steps.hypotheses import choose
+from cemnet_ros.pipeline.steps.metric_cem import EngineUnits
+from cemnet_ros.pipeline.steps.polish import map_sample
 from cemnet_ros.pipeline.steps.preprocess import subsample, voxel_downsample
-from cemnet_ros.pipeline.steps.tracking import PREDICTION_SPREADS, map_sample, wide_polish
 from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
 
 POLISH_FRACTION = 0.8  # hypotheses whose CEM fitness is this close to the best one's get polished
@@ -41,22 +43,29 @@ def prior_registrar(config: AlignerConfig, given: Optional[Registrar] = None) ->
                                                  n_points=rec.points, device=config.registration.device))
 
 
-class Recovery:
-    """The global search around a guess, its hypotheses polished and judged, the best one chosen."""
+def lean_search(search: GlobalSearchConfig, effort: float) -> GlobalSearchConfig:
+    """The search's scatter and seeds scaled by ``effort`` (0, 1] (the hypotheses and their CEM kept)."""
+    if effort >= 1.0:
+        return search
+    return dataclasses.replace(search, n_scatter=max(search.n_hypotheses, search.n_seeds,
+                                                     round(effort * search.n_scatter)),
+                               n_per_seed=round(effort * search.n_per_seed))
 
-    def __init__(self, config: AlignerConfig, spread: AdaptiveSpread, judge: StepJudge,
-                 prior: Optional[Registrar] = None) -> None:
+
+class Recovery:
+    """The global search around a guess, its hypotheses polished and judged in the contest, the best chosen."""
+
+    def __init__(self, config: AlignerConfig, judge: StepJudge, prior: Optional[Registrar] = None) -> None:
         self.config = config
-        self.spread = spread
         self.judge = judge
         self.prior = prior  # its network's mu0, sigma0 draw part of the scatter (None: uniform only)
 
-    def recover(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray,
-                T_fallback: Optional[np.ndarray] = None, T_last: Optional[np.ndarray] = None,
-                rivals: Sequence[Estimate] = ()) -> Estimate:
-        """The global CEM search around ``T_guess``, each distinct hypothesis polished, competing with
-        ``rivals`` (tracking's answers) or, without them, the polished ``T_guess`` and ``T_last`` (the last
-        pose). The chosen answer fails unless it is confirmed (:meth:`~.health.HealthMonitor.unconfirmed`).
+    def recover(self, frame: Frame, target_map: VoxelMap, contest: Contest,
+                T_fallback: Optional[np.ndarray] = None, T_last: Optional[np.ndarray] = None) -> Estimate:
+        """The global CEM search around the contest's prediction (the guess), each hypothesis entering
+        ``contest``; a contest without answers (tracking did not run) gets the polished guess and ``T_last``
+        (the last pose) too. The chosen answer fails unless it is confirmed
+        (:meth:`~.health.HealthMonitor.unconfirmed`).
 
         ``T_fallback``: where to search instead when the map has no points near the guess (a wild prediction
         left the map: where the map last grew). The scan is placed at the guess and the engine's units are
@@ -64,44 +73,38 @@ class Recovery:
         translation disc is the sensor's displacement.
         """
         cfg, rec = self.config, self.config.recovery
+        T_guess = contest.T_predicted
         target = map_sample(cfg, frame, target_map, T_guess, rec.points, margin=rec.radius)
         if len(target) < cfg.preprocess.min_points and T_fallback is not None:
             T_guess = T_fallback
             target = map_sample(cfg, frame, target_map, T_guess, rec.points, margin=rec.radius)
+            if not contest.answers:
+                contest = contest.recentred(T_guess)
         if len(target) < cfg.preprocess.min_points:
             return self.judge.off_map(frame, T_guess, "guess", rec.radius)
-        to_units, from_units = frame.network_units(T_guess[:3, 3])
+        units = EngineUnits(frame, T_guess[:3, 3])
         seed = max(cfg.registration.seed, 0)
         # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
         uniform = voxel_downsample(frame.near, target_map.voxel_size)
-        source = apply_transform(T_guess, subsample(uniform, rec.points, "random", seed))
-        source_units, target_units = apply_transform(to_units, source), apply_transform(to_units, target)
-        hypotheses = global_search(source_units, target_units, np.zeros(6), rec.radius / frame.scale, rec.search,
-                                   seed=seed, prior=self._network_prior(source_units, target_units))
-        T_local = [] if rivals else [(T_guess, "prediction")] + ([] if T_last is None else [(T_last, "last pose")])
-        estimates = list(rivals) + [self._judged(frame, target_map, T_guess, T_start, origin)
-                                    for T_start, origin in T_local]
+        source = units.points(apply_transform(T_guess, subsample(uniform, rec.points, "random", seed)))
+        hypotheses = global_search(source, units.points(target), np.zeros(6), rec.radius / frame.scale,
+                                   lean_search(rec.search, contest.polisher.effort),
+                                   seed=seed, prior=self._network_prior(source, units.points(target)))
+        contest.escalate(rec.radius)
+        if not contest.answers:
+            contest.enter(T_guess, Origin.PREDICTION, wide=True)
+            if T_last is not None:
+                contest.enter(T_last, Origin.LAST_POSE, wide=True)
         for hypothesis in hypotheses:
             if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
                 break  # far behind the best: not worth a polish, nor a rival
-            T_cem = from_units @ hypothesis.T_target_source @ to_units @ T_guess
-            T_cem[3] = (0.0, 0.0, 0.0, 1.0)
-            estimates.append(self._judged(frame, target_map, T_guess, T_cem, "search"))
-        rotation, translation = self.spread.spread()
-        near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
-        chosen = choose(estimates, T_guess, rec.ambiguity_ratio, near)
+            contest.enter(units.pose_in_metres(hypothesis.T_target_source) @ T_guess, Origin.SEARCH, wide=True)
+        chosen = contest.choose(rec.ambiguity_ratio)
         chosen.recovered = True  # this step ran the global search, whichever answer won
         why = self.judge.health.unconfirmed(chosen.signals.fitness, chosen.support)
         if why and not chosen.failures:
             chosen.failures.append(why)
         return chosen
-
-    def _judged(self, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, T_start: np.ndarray,
-                origin: str) -> Estimate:
-        """The answer polished (widely: a start can be a metre or degrees off) from ``T_start``, judged."""
-        polish = wide_polish(self.config, frame, target_map, T_start)
-        return self.judge.judge(frame, target_map, T_guess, T_start, polish, 0.0, recovered=True,
-                                prediction_std=self.config.recovery.radius, origin=origin)
 
     def _network_prior(self, source: np.ndarray, target: np.ndarray) -> Optional[SearchPrior]:
         """The network's raw mu0, sigma0 for the search's clouds in units (None: no network, or too few points)."""

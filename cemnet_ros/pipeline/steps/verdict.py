@@ -46,6 +46,8 @@ class AlignmentStep:
     signals: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)  # (kind, message) from the input checks (decimated, restarted)
     origin: str = ""  # the start the published answer was polished from: prediction, cem, last pose, search
+    effort: float = 1.0  # the share of the polishes' and the search's budgets this scan had (a live node behind)
+    polishes: int = 0  # answers polished and judged for this scan (the cost of its decision)
 
 
 @dataclass
@@ -61,8 +63,10 @@ class Estimate:
     free_directions: np.ndarray  # (6, k) normalised directions the scene leaves unconstrained
     length: float  # the lever arm of that normalisation
     origin: str = ""  # the kind of start it was polished from: cem, prediction, last pose, search
-    tied: bool = False  # chosen among distinct near-ties (:mod:`.hypotheses`): its pose is a guess among equals
-    support: int = 1  # how many kinds of the competing starts reached this answer (:mod:`.hypotheses`)
+    tied: bool = False  # chosen among distinct near-ties (:mod:`.contest`): its pose is a guess among equals
+    support: int = 1  # how many kinds of the competing starts reached this answer (:mod:`.contest`)
+    converged: bool = True  # its polish stopped before its budget
+    explained: bool = False  # its polish converged within reach of the prediction (:mod:`.polish`)
 
     def offset_from(self, T_reference: np.ndarray) -> tuple[float, float]:
         """(metres, radians) from ``T_reference`` along the constrained directions only."""
@@ -95,18 +99,18 @@ class StepJudge:
         self.config = config
         self.health = health
 
-    def judge(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, T_cem: np.ndarray,
+    def judge(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, T_start: np.ndarray,
               polish: PolishResult, spread_m: float, recovered: bool, prediction_std: float, origin: str
               ) -> Estimate:
-        """The verdict on the polished ``polish.T_target_source`` (CEM answer ``T_cem``, final CEM spread
-        ``spread_m``; ``origin``: the kind of start polished); ``prediction_std`` (m) is the variance kept along
-        unconstrained directions."""
+        """The verdict on ``polish.T_target_source``, polished from ``T_start`` (``origin``: its kind; the
+        disagreement signals say how far the polish moved it; ``spread_m``: the CEM's final spread when the CEM
+        gave it); ``prediction_std`` (m) is the variance kept along unconstrained directions."""
         cfg = self.config.health
         T_final = polish.T_target_source
         conditioning = Conditioning.of(polish.hessian, frame.length)
         fitness = target_map.inlier_fraction(frame.polish, T_final, self.config.polish.inlier_distance
                                              * frame.polish_voxel, self.config.polish.inlier_residual)
-        metres, radians = disagreement(T_cem, T_final)
+        metres, radians = disagreement(T_start, T_final)
         signals = Signals(fitness, metres, radians, conditioning.ratio, spread_m)
         failures = self.health.failures(signals)
         if polish.n_pairs < MIN_POLISH_PAIRS:

@@ -1,0 +1,73 @@
+"""Polishing a start against the map (metres): the precision of every answer tracking and the recovery publish.
+
+* **fine**: point to plane against the whole map (:mod:`.refine`), pairs within two frame voxels; the first
+  steps run on a stride of the polish points (``polish.coarse_stride``), the last ones and the Hessian on all;
+* **basin**: GICP of the scan against the map's last scan (:mod:`.basin`), pairs within ``polish.wide_distance``
+  frame voxels: it finds the basin from a start a metre or tens of degrees off;
+* **wide**: the basin, then fine.
+
+A polish *converged within reach* of a pose when it stopped before its budget and its answer lies within its
+pairing distance of that pose (translation + RMS range x rotation): the pose was already in the basin the polish
+settled in, so the two cannot be rival hypotheses.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.basin import gicp
+from cemnet_ros.pipeline.steps.frame import Frame
+from cemnet_ros.pipeline.steps.health import disagreement
+from cemnet_ros.pipeline.steps.refine import PolishResult, point_to_plane_icp
+
+FINE_DISTANCE = 2.0  # frame voxels: the fine polish's pairing distance, and its reach
+
+
+def map_sample(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, n: int,
+               margin: float = 0.0) -> np.ndarray:
+    """``n`` map points within the CEM's radius (+ ``margin`` m) of the guessed sensor position."""
+    radius = config.preprocess.cem_radius * frame.scale + margin
+    return target_map.sample(n, T_guess[:3, 3], radius, seed=max(config.registration.seed, 0))
+
+
+class Polisher:
+    """The polishes of one frame against one map; ``effort`` (0, 1] scales their iteration budgets (a live node
+    that has fallen behind spends less on each scan)."""
+
+    def __init__(self, config: AlignerConfig, frame: Frame, target_map: VoxelMap, effort: float = 1.0) -> None:
+        self.config, self.frame, self.map, self.effort = config, frame, target_map, effort
+
+    @property
+    def iters(self) -> int:
+        """The fine polish's budget of Gauss-Newton steps."""
+        return max(1, round(self.effort * self.config.polish.iters))
+
+    @property
+    def reach(self) -> float:
+        """The fine polish's pairing distance (m)."""
+        return FINE_DISTANCE * self.frame.polish_voxel
+
+    def fine(self, T_start: np.ndarray) -> PolishResult:
+        """Point to plane from ``T_start`` with every polish point, pairs within :attr:`reach`."""
+        return point_to_plane_icp(self.map, self.frame.polish, T_start, self.reach, self.iters,
+                                  coarse_stride=self.config.polish.coarse_stride)
+
+    def basin(self, T_start: np.ndarray) -> np.ndarray:
+        """GICP from ``T_start`` against the map's last scan (``T_start`` itself when the map keeps none)."""
+        cfg = self.config.polish
+        if self.map.last_scan is None:
+            return T_start
+        return gicp(self.map.last_scan, self.frame.gicp_cloud(self.map.voxel_size), T_start,
+                    cfg.wide_distance * self.frame.polish_voxel, max(1, round(self.effort * cfg.wide_iters)))
+
+    def wide(self, T_start: np.ndarray) -> PolishResult:
+        """:meth:`basin`, then :meth:`fine`: for a start that may be a metre or degrees off."""
+        return self.fine(self.basin(T_start))
+
+    def within_reach(self, polish: PolishResult, T_pose: np.ndarray) -> bool:
+        """``polish`` converged before its budget, within :attr:`reach` of ``T_pose`` (see the module)."""
+        if polish.iterations >= self.iters:
+            return False
+        moved_m, moved_rad = disagreement(T_pose, polish.T_target_source)
+        return moved_m + self.frame.length * moved_rad <= self.reach

@@ -1,0 +1,148 @@
+"""The contest's rules (support, standing, near-ties, ambiguity, distinctness) on a hand-made landscape of basins."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cemnet_ros.data.street import make_transform
+from cemnet_ros.pipeline.steps.contest import Contest, Origin, distinct
+from cemnet_ros.pipeline.steps.health import HealthConfig, HealthMonitor, Signals
+from cemnet_ros.pipeline.steps.refine import PolishResult
+from cemnet_ros.pipeline.steps.verdict import Estimate
+
+ITERS = 20
+REACH = 0.2  # m: the fake fine polish's pairing distance
+
+
+@dataclass
+class Basin:
+    pose: np.ndarray
+    fitness: float
+
+
+class Landscape:
+    """A fake Polisher: the fine polish settles in the basin within REACH of its start (converged), else stays
+    (its budget spent); the basin stage (GICP) finds any basin within 2 m."""
+
+    def __init__(self, *basins: Basin) -> None:
+        self.basins = list(basins)
+        self.frame, self.map, self.effort, self.iters, self.reach = None, None, 1.0, ITERS, REACH
+
+    def _nearest(self, T: np.ndarray, radius: float):
+        near = [b for b in self.basins if np.linalg.norm(b.pose[:3, 3] - T[:3, 3]) <= radius]
+        return min(near, key=lambda b: np.linalg.norm(b.pose[:3, 3] - T[:3, 3])) if near else None
+
+    def fine(self, T_start: np.ndarray) -> PolishResult:
+        basin = self._nearest(T_start, REACH)
+        T = T_start if basin is None else basin.pose
+        return PolishResult(T.copy(), np.eye(6), 1e-4, 500, ITERS if basin is None else 5)
+
+    def basin(self, T_start: np.ndarray) -> np.ndarray:
+        basin = self._nearest(T_start, 2.0)
+        return T_start if basin is None else basin.pose.copy()
+
+    def within_reach(self, polish: PolishResult, T_pose: np.ndarray) -> bool:
+        return polish.iterations < ITERS and np.linalg.norm(polish.T_target_source[:3, 3] - T_pose[:3, 3]) <= REACH
+
+    def fitness(self, T: np.ndarray) -> float:
+        basin = self._nearest(T, 1e-6)
+        return 0.1 if basin is None else basin.fitness
+
+
+class Judge:
+    """A fake StepJudge: fitness from the landscape, the real running level and confirmation."""
+
+    def __init__(self, landscape: Landscape, level: float = 0.8) -> None:
+        self.landscape = landscape
+        self.health = HealthMonitor(HealthConfig())
+        self.health.accept(level)
+
+    def judge(self, frame, target_map, T_predicted, T_start, polish, spread_m, recovered, prediction_std, origin):
+        fitness = self.landscape.fitness(polish.T_target_source)
+        failures = [] if fitness >= 0.3 else ["low fitness"]
+        return Estimate(polish.T_target_source, np.eye(6), Signals(fitness, 0.0, 0.0, 1.0, 0.0), failures, [],
+                        recovered, np.zeros((6, 0)), 10.0, origin)
+
+
+def at(x: float, yaw_deg: float = 0.0) -> np.ndarray:
+    return make_transform(yaw=np.radians(yaw_deg), t=(x, 0.0, 0.0))
+
+
+def contest(*basins: Basin, near=(0.6, 0.2)) -> Contest:
+    landscape = Landscape(*basins)
+    return Contest(landscape, Judge(landscape), at(0.0), near, prediction_std=0.1)  # type: ignore[arg-type]
+
+
+def test_answers_closer_than_the_vouched_precision_are_one():
+    assert not distinct(at(0.0), at(0.09)) and not distinct(at(0.0, 0.9), at(0.0))
+    assert distinct(at(0.0), at(0.11)) and distinct(at(0.0), at(0.0, 1.1))
+
+
+def test_a_converged_polish_within_reach_of_the_prediction_stands_alone():
+    c = contest(Basin(at(0.1), 0.8))
+    answer = c.enter(at(0.0), Origin.PREDICTION)
+    assert answer is not None and answer.explained and c.standing() is answer and c.polishes == 1
+
+
+def test_an_answer_beyond_reach_needs_a_second_kind_of_start_within_the_spread():
+    c = contest(Basin(at(0.5), 0.8))
+    cem = c.enter(at(0.45), Origin.CEM, wide=True)
+    assert cem is not None and not cem.explained and c.standing() is None  # one start: it needs a rival
+    assert c.enter(at(0.0), Origin.PREDICTION, wide=True) is None  # its basin is the CEM's answer: no new polish
+    assert c.support(cem) == 2 and c.standing() is cem and c.polishes == 1
+
+
+def test_two_starts_agreeing_far_beyond_the_spread_do_not_stand():
+    c = contest(Basin(at(1.5), 0.8))
+    c.enter(at(1.4), Origin.CEM, wide=True)
+    c.enter(at(0.0), Origin.PREDICTION, wide=True)
+    assert c.support(c.answers[0]) == 2 and c.standing() is None  # the last pose must compete first
+
+
+def test_an_unconfirmed_answer_does_not_stand_whatever_its_support():
+    c = contest(Basin(at(0.5), 0.6))  # below health.confirm_ratio x the level 0.8
+    c.enter(at(0.45), Origin.CEM, wide=True)
+    c.enter(at(0.0), Origin.PREDICTION, wide=True)
+    assert c.support(c.answers[0]) == 2 and c.standing() is None
+
+
+def test_the_global_search_counts_once_however_many_hypotheses_reach_an_answer():
+    c = contest(Basin(at(1.0), 0.8))
+    c.escalate(10.0)
+    for x in (0.9, 1.1, 1.2):
+        c.enter(at(x), Origin.SEARCH, wide=True)
+    assert len(c.answers) == 1 and c.support(c.answers[0]) == 1 and c.answers[0].recovered
+
+
+def test_a_start_entered_twice_is_polished_once():
+    c = contest(Basin(at(0.1), 0.8))
+    assert c.enter(at(0.0), Origin.PREDICTION) is not None
+    assert c.enter(at(0.05), Origin.PREDICTION) is None and c.polishes == 1
+    assert c.enter(at(0.0), Origin.PREDICTION, wide=True) is None  # the wide one lands on the same answer
+
+
+def test_the_fittest_answer_wins_when_no_other_comes_close():
+    c = contest(Basin(at(0.1), 0.5), Basin(at(1.5), 0.9))
+    c.enter(at(0.0), Origin.PREDICTION)
+    c.enter(at(1.4), Origin.LAST_POSE, wide=True)
+    chosen = c.choose(0.95)
+    assert chosen.origin == "last pose" and not chosen.failures and not chosen.tied
+
+
+def test_a_near_tie_keeps_the_answer_next_to_the_prediction_flagged():
+    near_x, far_x = 0.3, 1.5
+    c = contest(Basin(at(near_x), 0.80), Basin(at(far_x), 0.82))
+    c.enter(at(near_x - 0.1), Origin.CEM, wide=True)
+    c.enter(at(far_x), Origin.LAST_POSE, wide=True)
+    chosen = c.choose(0.95)
+    assert np.allclose(chosen.T_odom_sensor, at(near_x)) and chosen.tied and "symmetric scene" in chosen.notes[0]
+    assert not chosen.accepted  # flagged: the map does not take it in
+
+
+def test_near_ties_none_next_to_the_prediction_fail_as_ambiguous():
+    c = contest(Basin(at(1.5), 0.80), Basin(at(-1.5), 0.81))
+    c.enter(at(1.4), Origin.CEM, wide=True)
+    c.enter(at(-1.4), Origin.LAST_POSE, wide=True)
+    chosen = c.choose(0.95)
+    assert chosen.failures and "ambiguous" in chosen.failures[-1]
