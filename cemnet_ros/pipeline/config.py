@@ -15,7 +15,7 @@ from cemnet_ros.pipeline.steps.adaptive import AdaptiveConfig
 from cemnet_ros.pipeline.steps.health import HealthConfig
 from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig
 from cemnet_ros.pipeline.steps.preprocess import SAMPLING_METHODS
-from cemnet_ros.schema import param, section
+from cemnet_ros.schema import param, section, validate
 
 PRIORS = ("motion", "network", "identity")
 RECOVERY_PRIORS = ("uniform", "network")
@@ -47,14 +47,9 @@ class PreprocessConfig:
                          "registered at the sweep's middle, published at the stamp)")
 
     def __post_init__(self) -> None:
-        if self.sampling not in SAMPLING_METHODS:
-            raise ValueError(f"sampling must be one of {SAMPLING_METHODS}, not {self.sampling!r}")
-        if self.min_points < 3:
-            raise ValueError("min_points must be >= 3")
+        validate(self)
         if 0 < self.max_range < self.min_range:
             raise ValueError("max_range must be >= min_range (or 0 = no crop)")
-        if self.cem_radius <= 0:
-            raise ValueError("cem_radius must be > 0")
 
 
 @dataclass
@@ -86,6 +81,9 @@ class MapConfig:
 
     voxel_factor: float = param(3.0, "map voxel = this x the frame voxel", low=0.1)
     points_per_voxel: int = param(10, "points kept per map voxel", low=1)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 @dataclass

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cemnet_ros.core.geometry import rotation_angle_rad
-from cemnet_ros.schema import param
+from cemnet_ros.schema import param, validate
 
 
 @dataclass
@@ -32,10 +32,9 @@ class AdaptiveConfig:
     window: int = param(100, "prediction errors remembered", low=1)
 
     def __post_init__(self) -> None:
-        if not 0 < self.min_rotation <= self.max_rotation or not 0 < self.min_translation <= self.max_translation:
-            raise ValueError("adaptive spreads need 0 < min <= max")
-        if self.initial_rotation <= 0 or self.initial_translation <= 0 or self.factor <= 0 or self.window < 1:
-            raise ValueError("initial spreads, factor and window must be > 0")
+        validate(self)
+        if self.min_rotation > self.max_rotation or self.min_translation > self.max_translation:
+            raise ValueError("adaptive spreads need min <= max")
 
 
 class AdaptiveSpread:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cemnet_ros.core.geometry import rotation_angle_rad
-from cemnet_ros.schema import param
+from cemnet_ros.schema import param, validate
 
 
 @dataclass
@@ -41,14 +41,7 @@ class HealthConfig:
     covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.min_fitness < 1.0 or not 0.0 < self.fitness_drop <= 1.0:
-            raise ValueError("min_fitness must lie in [0, 1) and fitness_drop in (0, 1]")
-        if not 0.0 <= self.level_memory < 1.0:
-            raise ValueError("level_memory must lie in [0, 1)")
-        if not 0.0 <= self.min_conditioning < 1.0:
-            raise ValueError("min_conditioning must lie in [0, 1)")
-        if self.covariance_inflation < 1.0:
-            raise ValueError("covariance_inflation must be >= 1")
+        validate(self)
 
 
 @dataclass

@@ -27,7 +27,7 @@ from typing import Optional
 
 import numpy as np
 
-from cemnet_ros.schema import param
+from cemnet_ros.schema import param, validate
 
 SECTORS = 36  # azimuth bins of the coverage check
 COVERAGE_SAMPLES = 16384  # points the coverage is counted on (a share per sector needs no more)
@@ -60,6 +60,9 @@ class InputChecksConfig:
                                     "0 = off", low=0.0)
     stamp_jump: float = param(30.0, "a stamp more than this (s, and 20 periods) after the last one, or before it, "
                               "is rejected unless the next scan confirms it; 0 = off", low=0.0)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 @dataclass
