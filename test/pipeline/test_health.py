@@ -1,8 +1,8 @@
 """Adaptive spread, failure signals, Hessian covariance and degenerate directions (no engine needed)."""
 import numpy as np
 import pytest
+from street_scene import make_transform
 
-from cemnet_ros.data.street import make_transform
 from cemnet_ros.pipeline.config import AdaptiveConfig, HealthConfig
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.covariance import (
