@@ -51,6 +51,49 @@ class InputChecksConfig:
 
 
 @dataclass
+class AdaptiveConfig:
+    """Spreads in radians and metres; ``factor`` times the RMS prediction error, clipped to [min, max]."""
+
+    initial_rotation: float = param(0.05, "rotation spread (rad) until prediction errors have been observed",
+                                    low=1e-4, high=3.2)
+    initial_translation: float = param(0.5, "translation spread (m) until prediction errors have been observed",
+                                       low=1e-4)
+    min_rotation: float = param(0.01, "smallest rotation spread (rad)", low=1e-5, high=3.2)
+    min_translation: float = param(0.1, "smallest translation spread (m)", low=1e-5)
+    max_rotation: float = param(0.5, "largest rotation spread (rad)", low=1e-5, high=3.2)
+    max_translation: float = param(5.0, "largest translation spread (m)", low=1e-5)
+    factor: float = param(3.0, "spread = factor x the RMS of the recent prediction errors", low=1e-3)
+    window: int = param(100, "prediction errors remembered", low=1)
+
+    def __post_init__(self) -> None:
+        validate(self)
+        if self.min_rotation > self.max_rotation or self.min_translation > self.max_translation:
+            raise ValueError("adaptive spreads need min <= max")
+
+
+@dataclass
+class HealthConfig:
+    """Limits of the failure signals (fractions, metres, radians)."""
+
+    min_fitness: float = param(0.3, "inlier fraction after the polish below which a step fails", low=0.0,
+                               high=0.99)
+    fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
+                                "level", low=0.01, high=1.0)
+    confirm_ratio: float = param(0.9, "an answer that only one start reached must fit at least this fraction of "
+                                 "the running level; below it the global search competes with it (tracking) or "
+                                 "the step fails (recovery)", low=0.0, high=1.0)
+    level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
+                                low=0.0, high=0.999)
+    min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
+                                    "below which a step is degenerate (flagged, prediction kept along the free "
+                                    "direction)", low=0.0, high=0.99)
+    covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass
 class PreprocessConfig:
     """What of a scan is used (metres from the sensor)."""
 
@@ -95,27 +138,6 @@ class TrackingConfig:
 
 
 @dataclass
-class AdaptiveConfig:
-    """Spreads in radians and metres; ``factor`` times the RMS prediction error, clipped to [min, max]."""
-
-    initial_rotation: float = param(0.05, "rotation spread (rad) until prediction errors have been observed",
-                                    low=1e-4, high=3.2)
-    initial_translation: float = param(0.5, "translation spread (m) until prediction errors have been observed",
-                                       low=1e-4)
-    min_rotation: float = param(0.01, "smallest rotation spread (rad)", low=1e-5, high=3.2)
-    min_translation: float = param(0.1, "smallest translation spread (m)", low=1e-5)
-    max_rotation: float = param(0.5, "largest rotation spread (rad)", low=1e-5, high=3.2)
-    max_translation: float = param(5.0, "largest translation spread (m)", low=1e-5)
-    factor: float = param(3.0, "spread = factor x the RMS of the recent prediction errors", low=1e-3)
-    window: int = param(100, "prediction errors remembered", low=1)
-
-    def __post_init__(self) -> None:
-        validate(self)
-        if self.min_rotation > self.max_rotation or self.min_translation > self.max_translation:
-            raise ValueError("adaptive spreads need min <= max")
-
-
-@dataclass
 class MapConfig:
     """The local map (a voxel hash map in the odom frame)."""
 
@@ -136,28 +158,6 @@ class PolishConfig:
     inlier_distance: float = param(2.0, "a point with a map point this close (frame voxels) ...", low=1e-3)
     inlier_residual: float = param(0.05, "... and within this of its plane (m; the sensor's noise, not the "
                                    "scene's size) counts for the fitness", low=1e-4)
-
-
-@dataclass
-class HealthConfig:
-    """Limits of the failure signals (fractions, metres, radians)."""
-
-    min_fitness: float = param(0.3, "inlier fraction after the polish below which a step fails", low=0.0,
-                               high=0.99)
-    fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
-                                "level", low=0.01, high=1.0)
-    confirm_ratio: float = param(0.9, "an answer that only one start reached must fit at least this fraction of "
-                                 "the running level; below it the global search competes with it (tracking) or "
-                                 "the step fails (recovery)", low=0.0, high=1.0)
-    level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
-                                low=0.0, high=0.999)
-    min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
-                                    "below which a step is degenerate (flagged, prediction kept along the free "
-                                    "direction)", low=0.0, high=0.99)
-    covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
-
-    def __post_init__(self) -> None:
-        validate(self)
 
 
 @dataclass
