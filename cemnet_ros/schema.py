@@ -73,18 +73,19 @@ class Parameter:
                     raise TypeError(f"expected {len(self.default)} numbers")
         except (TypeError, ValueError) as err:
             raise ValueError(f"parameter {self.name}: {value!r}: {err}") from None
-        check_limits("parameter " + self.name, value, self.low, self.high, self.choices)
+        _check_limits("parameter " + self.name, value, self.low, self.high, self.choices)
         return value
 
 
-def check_limits(name: str, value: Any, low: Optional[float], high: Optional[float],
-                 choices: Optional[tuple]) -> None:
-    """ValueError naming ``name`` if ``value`` (or any number of a tuple) is outside [low, high] or not a choice."""
+def _check_limits(name: str, value: Any, low: Optional[float], high: Optional[float],
+                  choices: Optional[tuple]) -> None:
+    """ValueError naming ``name`` if ``value`` (or any number of a tuple) is not a choice or not within [low, high]
+    (NaN never is)."""
     if choices and value not in choices:
         raise ValueError(f"{name} must be one of {choices}, not {value!r}")
     numbers = value if isinstance(value, (tuple, list)) else (value,) if isinstance(value, (int, float)) else ()
     for v in numbers:
-        if (low is not None and v < low) or (high is not None and v > high):
+        if (low is not None and not low <= v) or (high is not None and not v <= high):
             raise ValueError(f"{name} = {value!r} outside [{low}, {high}]")
 
 
@@ -100,7 +101,7 @@ def validate(config: Any) -> None:
         name, value = f"{type(config).__name__}.{f.name}", getattr(config, f.name)
         if isinstance(f.default, tuple) and len(value) != len(f.default):
             raise ValueError(f"{name} must have {len(f.default)} values, not {len(value)}")
-        check_limits(name, value, f.metadata["low"], f.metadata["high"], f.metadata["choices"])
+        _check_limits(name, value, f.metadata["low"], f.metadata["high"], f.metadata["choices"])
 
 
 def parameters(config: Any, exclude: Iterable[str] = (), prefix: str = "") -> dict[str, Parameter]:

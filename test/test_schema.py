@@ -125,6 +125,8 @@ def test_validate_bounds_are_inclusive_tuples_keep_their_length_and_cross_field_
     assert HealthConfig(min_fitness=0.99, fitness_drop=1.0).min_fitness == 0.99  # the bounds themselves pass
     with pytest.raises(ValueError, match=r"HealthConfig.min_fitness = 0.995 outside \[0.0, 0.99\]"):
         HealthConfig(min_fitness=0.995)
+    with pytest.raises(ValueError, match="HealthConfig.min_fitness = nan outside"):
+        HealthConfig(min_fitness=float("nan"))
     from cemnet_ros.core.config import GlobalSearchConfig
 
     with pytest.raises(ValueError, match="resample_sigma must have 6 values"):
