@@ -16,7 +16,7 @@ from typing import Any, List, Optional, Tuple
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.pipeline.steps.deskew import TIME_FIELDS, TimeFieldError, normalize_point_times
+from cemnet_ros.point_times import TIME_FIELDS, TimeFieldError, normalize_point_times
 
 # sensor_msgs/PointField datatype constants.
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
@@ -134,8 +134,8 @@ def decode_point_times(msg: Any, stamp_ns: Optional[int] = None) -> Optional[np.
 
     Aligned with :func:`decode_xyz`'s points (the same rows with non-finite x, y or z dropped). The field is the
     first of ``t``, ``time``, ``offset_time``, ``timestamp`` present
-    (:data:`~cemnet_ros.pipeline.steps.deskew.TIME_FIELDS`); its unit is read as
-    :func:`~cemnet_ros.pipeline.steps.deskew.normalize_point_times` documents (integers: ns relative to the stamp;
+    (:data:`~cemnet_ros.point_times.TIME_FIELDS`); its unit is read as
+    :func:`~cemnet_ros.point_times.normalize_point_times` documents (integers: ns relative to the stamp;
     floats: s relative, absolute s, absolute ns). ``stamp_ns`` defaults to the header's.
     Raises :class:`CloudError` as :func:`decode_xyz` does, and kind ``time_field`` when the field cannot be read
     or fits no time convention (the caller may then go on without deskewing).

@@ -14,7 +14,8 @@ from typing import Any, Callable, Iterable, Mapping, Optional
 
 def param(default: Any, help: str, *, low: Optional[float] = None, high: Optional[float] = None,
           choices: Optional[tuple] = None) -> Any:
-    """A documented config field: ``low``/``high`` bound numbers (inclusive), ``choices`` strings."""
+    """A documented config field: ``low``/``high`` bound numbers, both inclusive (each number of a tuple),
+    ``choices`` strings. :func:`validate` enforces them on construction, :meth:`Parameter.check` on overrides."""
     return field(default=default, metadata={"help": help, "low": low, "high": high, "choices": choices})
 
 
@@ -72,13 +73,35 @@ class Parameter:
                     raise TypeError(f"expected {len(self.default)} numbers")
         except (TypeError, ValueError) as err:
             raise ValueError(f"parameter {self.name}: {value!r}: {err}") from None
-        if self.choices and value not in self.choices:
-            raise ValueError(f"parameter {self.name} must be one of {self.choices}, not {value!r}")
-        numbers = value if kind is tuple else (value,) if kind in (int, float) else ()
-        for v in numbers:
-            if (self.low is not None and v < self.low) or (self.high is not None and v > self.high):
-                raise ValueError(f"parameter {self.name} = {value!r} outside [{self.low}, {self.high}]")
+        _check_limits("parameter " + self.name, value, self.low, self.high, self.choices)
         return value
+
+
+def _check_limits(name: str, value: Any, low: Optional[float], high: Optional[float],
+                  choices: Optional[tuple]) -> None:
+    """ValueError naming ``name`` if ``value`` (or any number of a tuple) is not a choice or not within [low, high]
+    (NaN never is)."""
+    if choices and value not in choices:
+        raise ValueError(f"{name} must be one of {choices}, not {value!r}")
+    numbers = value if isinstance(value, (tuple, list)) else (value,) if isinstance(value, (int, float)) else ()
+    for v in numbers:
+        if (low is not None and not low <= v) or (high is not None and not v <= high):
+            raise ValueError(f"{name} = {value!r} outside [{low}, {high}]")
+
+
+def validate(config: Any) -> None:
+    """Check each :func:`param` field of a config dataclass against its metadata (call it in ``__post_init__``).
+
+    Bounds are inclusive; a tuple keeps its default's length. Nested sections validate themselves; rules that
+    relate several fields stay in the class's ``__post_init__``, after this call.
+    """
+    for f in dataclasses.fields(config):
+        if "help" not in f.metadata or f.default is dataclasses.MISSING:  # a section (default_factory)
+            continue
+        name, value = f"{type(config).__name__}.{f.name}", getattr(config, f.name)
+        if isinstance(f.default, tuple) and len(value) != len(f.default):
+            raise ValueError(f"{name} must have {len(f.default)} values, not {len(value)}")
+        _check_limits(name, value, f.metadata["low"], f.metadata["high"], f.metadata["choices"])
 
 
 def parameters(config: Any, exclude: Iterable[str] = (), prefix: str = "") -> dict[str, Parameter]:

@@ -33,9 +33,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import PointCloud2, PointField
 
-from cemnet_ros.data.hostile import FRAME, corpus
-from cemnet_ros.io.atomic import atomic_write_bytes, json_text, write_report
-from cemnet_ros.ros.probe import (
+from cemnet_ros.bench.dds_probe import (
     REPO,
     Probe,
     dds_environment,
@@ -46,6 +44,8 @@ from cemnet_ros.ros.probe import (
     stamped,
     start_node,
 )
+from cemnet_ros.data.hostile import FRAME, corpus
+from cemnet_ros.io.atomic import atomic_write_bytes, json_text, write_report
 
 NS = "/soak"
 RATE_HZ = 10.0

@@ -70,3 +70,77 @@ def test_shipped_params_file_and_docs_table_are_generated_from_the_schema():
         "regenerate: python -m cemnet_ros.ros.node_config > config/align_node.yaml"
     assert parameters_markdown() in (repo / "docs" / "node.md").read_text(), \
         "regenerate the table in docs/node.md: python -m cemnet_ros.ros.node_config --markdown"
+
+
+def _limited_fields(config_class):
+    """(field, low, high, choices) of each param of ``config_class`` that declares a limit."""
+    import dataclasses
+
+    for f in dataclasses.fields(config_class):
+        meta = f.metadata
+        if "help" in meta and f.default is not dataclasses.MISSING and (
+                meta["low"] is not None or meta["high"] is not None or meta["choices"]):
+            yield f.name, f.default, meta["low"], meta["high"], meta["choices"]
+
+
+def _validated_classes():
+    from cemnet_ros.core.config import GlobalSearchConfig
+    from cemnet_ros.eval.protocol import ProtocolConfig
+    from cemnet_ros.eval.sevenscenes import SevenScenesConfig
+    from cemnet_ros.pipeline.config import (
+        AdaptiveConfig,
+        HealthConfig,
+        InputChecksConfig,
+        MapConfig,
+        PolishConfig,
+        PreprocessConfig,
+        RecoveryConfig,
+        TrackingConfig,
+    )
+    from cemnet_ros.train.config import ScanPairConfig, TrainConfig
+    from cemnet_ros.train.known_motion import KnownMotionConfig
+
+    return [CEMConfig, RegistrationConfig, GlobalSearchConfig, PreprocessConfig, MapConfig, AdaptiveConfig,
+            HealthConfig, InputChecksConfig, TrackingConfig, PolishConfig, RecoveryConfig, TrainConfig,
+            ScanPairConfig, KnownMotionConfig, ProtocolConfig, SevenScenesConfig]
+
+
+@pytest.mark.parametrize("config_class", _validated_classes(), ids=lambda c: c.__name__)
+def test_constructing_a_config_enforces_its_schema_limits_inclusively(config_class):
+    name = config_class.__name__
+    checked = 0
+    for field_name, default, low, high, choices in _limited_fields(config_class):
+        if choices:
+            with pytest.raises(ValueError, match=f"{name}.{field_name} must be one of"):
+                config_class(**{field_name: "no such choice"})
+            checked += 1
+            continue
+        for bound, step in ((low, -1), (high, 1)):
+            if bound is None:
+                continue
+            beyond = bound + step * max(abs(bound), 1.0) * 0.5
+            if isinstance(default, int):
+                beyond = int(bound) + step
+            value = (beyond,) * len(default) if isinstance(default, tuple) else beyond
+            with pytest.raises(ValueError, match=f"{name}.{field_name} = .* outside"):
+                config_class(**{field_name: value})
+            checked += 1
+    assert checked > 0
+
+
+def test_validate_bounds_are_inclusive_tuples_keep_their_length_and_cross_field_rules_stay():
+    from cemnet_ros.pipeline.config import HealthConfig
+
+    assert HealthConfig(min_fitness=0.99, fitness_drop=1.0).min_fitness == 0.99  # the bounds themselves pass
+    with pytest.raises(ValueError, match=r"HealthConfig.min_fitness = 0.995 outside \[0.0, 0.99\]"):
+        HealthConfig(min_fitness=0.995)
+    with pytest.raises(ValueError, match="HealthConfig.min_fitness = nan outside"):
+        HealthConfig(min_fitness=float("nan"))
+    from cemnet_ros.core.config import GlobalSearchConfig
+
+    with pytest.raises(ValueError, match="resample_sigma must have 6 values"):
+        GlobalSearchConfig(resample_sigma=(0.1,) * 5)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="n_scatter must be >= n_hypotheses"):
+        GlobalSearchConfig(n_scatter=2, n_seeds=16)
+    with pytest.raises(ValueError, match="n_fused_iters"):
+        CEMConfig(n_iters=2, n_fused_iters=3)

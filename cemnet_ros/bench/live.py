@@ -17,9 +17,9 @@ import numpy as np
 
 from cemnet_ros.bench.real import Sequence, StepResult, sequence_metrics
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.node.aligner_session import AlignerSession
 from cemnet_ros.pipeline.node.extrinsic import BaseFrame
-from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.replay.realtime import live_summary, play_live
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.schema import build

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
-from cemnet_ros.schema import param, section
+from cemnet_ros.schema import param, section, validate
 
 Six = Tuple[float, float, float, float, float, float]
 UNSEEDED = -1  # a seed field's value for fresh randomness on every run
@@ -44,24 +44,9 @@ class CEMConfig:
     seed: int = param(0, "seed of the CEM's sampling; -1 = unseeded", low=-1)
 
     def __post_init__(self) -> None:
-        if self.n_candidates < 2:
-            raise ValueError("n_candidates must be >= 2")
-        if self.n_iters < 1:
-            raise ValueError("n_iters must be >= 1")
-        if not 0 <= self.n_fused_iters <= self.n_iters:
-            raise ValueError("n_fused_iters must lie in [0, n_iters]")
-        if self.epsilon <= 0:
-            raise ValueError("epsilon must be > 0")
-        if not 0.0 <= self.alpha <= 1.0:
-            raise ValueError("alpha must lie in [0, 1]")
-        if not 0.0 <= self.exploration_weight <= 1.0:
-            raise ValueError("exploration_weight must lie in [0, 1]")
-        if self.icp_steps < 0 or self.refine_icp_steps < 0:
-            raise ValueError("ICP step counts must be >= 0")
-        if self.icp_max_distance < 0:
-            raise ValueError("icp_max_distance must be >= 0 (0 = 2 epsilon)")
-        if not 0.0 < self.lattice_spacing <= 1.0:
-            raise ValueError("lattice_spacing must lie in (0, 1]")
+        validate(self)
+        if self.n_fused_iters > self.n_iters:
+            raise ValueError(f"n_fused_iters ({self.n_fused_iters}) must not exceed n_iters ({self.n_iters})")
 
     @property
     def icp_radius(self) -> float:
@@ -87,12 +72,7 @@ class RegistrationConfig:
     seed: int = param(0, "seed of the point sub-sampling; -1 = unseeded", low=-1)
 
     def __post_init__(self) -> None:
-        if self.prior not in ("network", "identity"):
-            raise ValueError(f"prior must be 'network' or 'identity', not {self.prior!r}")
-        if self.batchnorm not in ("batch", "running"):
-            raise ValueError(f"batchnorm must be 'batch' or 'running', not {self.batchnorm!r}")
-        if self.n_points < 32:
-            raise ValueError("n_points must be >= 32 (the network's k-NN graph needs k=20 neighbours)")
+        validate(self)
 
 
 @dataclass
@@ -121,13 +101,6 @@ class GlobalSearchConfig:
                                 "the CEM that refines each hypothesis")
 
     def __post_init__(self) -> None:
-        if self.n_scatter < max(self.n_hypotheses, self.n_seeds) or min(self.n_hypotheses, self.n_seeds) < 1:
-            raise ValueError("need n_scatter >= n_hypotheses, n_seeds >= 1")
-        if self.n_prior < 0 or self.prior_scale <= 0:
-            raise ValueError("n_prior must be >= 0 and prior_scale > 0")
-        if self.n_per_seed < 0 or len(self.resample_sigma) != 6 or min(self.resample_sigma) <= 0:
-            raise ValueError("n_per_seed must be >= 0 and resample_sigma six positive spreads")
-        if self.coarse_epsilon <= 0:
-            raise ValueError("coarse_epsilon must be > 0")
-        if len(self.refine_sigma) != 6 or min(self.refine_sigma) <= 0:
-            raise ValueError("refine_sigma must be six positive spreads")
+        validate(self)
+        if self.n_scatter < max(self.n_hypotheses, self.n_seeds):
+            raise ValueError("n_scatter must be >= n_hypotheses and n_seeds")

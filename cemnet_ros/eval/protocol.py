@@ -22,7 +22,7 @@ from typing import Iterator, Optional, Tuple, Union
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.schema import param
+from cemnet_ros.schema import param, validate
 
 # Distance of the far point that selects the partial view (unit-sphere objects: "at infinity").
 _FAR_RADIUS = 500.0
@@ -46,16 +46,9 @@ class ProtocolConfig:
                            "or 'sphere' (a uniformly random direction)", choices=FAR_POINTS)
 
     def __post_init__(self) -> None:
-        if self.n_points < 3:
-            raise ValueError("n_points must be >= 3")
-        if self.partial and not 3 <= self.n_partial <= self.n_points:
+        validate(self)
+        if self.partial and self.n_partial > self.n_points:
             raise ValueError(f"n_partial must lie in [3, n_points={self.n_points}], got {self.n_partial}")
-        if self.far_point not in FAR_POINTS:
-            raise ValueError(f"far_point must be one of {FAR_POINTS}, not {self.far_point!r}")
-        if not 0.0 <= self.max_angle_deg <= 180.0:
-            raise ValueError("max_angle_deg must lie in [0, 180]")
-        if self.max_translation < 0 or self.noise_sigma < 0 or self.noise_clip < 0:
-            raise ValueError("max_translation, noise_sigma and noise_clip must be >= 0")
 
 
 @dataclass

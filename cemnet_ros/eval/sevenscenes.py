@@ -21,7 +21,7 @@ from typing import List, Sequence, Tuple, Union
 import numpy as np
 
 from cemnet_ros.data.rgbd import DepthFrame, Intrinsics, depth_frames, depth_to_points, read_intrinsics
-from cemnet_ros.schema import param
+from cemnet_ros.schema import param, validate
 
 
 @dataclass
@@ -31,17 +31,14 @@ class SevenScenesConfig:
     frames_per_cloud: int = param(1, "consecutive depth frames fused (with their poses) into one cloud; 1 = each "
                                   "frame is one cloud", low=1)
     stride: int = param(1, "back-project every stride-th pixel in each direction", low=1)
-    max_depth: float = param(4.0, "depths beyond this (m) are dropped", low=0.0)
+    max_depth: float = param(4.0, "depths beyond this (m) are dropped", low=0.01)
     voxel: float = param(0.02, "one point per voxel of this size (m) before normalising (an even density); "
                          "0 = keep every point", low=0.0)
     n_resample: int = param(2048, "points drawn per cloud after normalising (the reference's Resampler)", low=3)
     seed: int = param(0, "cloud i is resampled with np.random.default_rng(seed + i)", low=0)
 
     def __post_init__(self) -> None:
-        if self.frames_per_cloud < 1 or self.stride < 1 or self.n_resample < 3:
-            raise ValueError("frames_per_cloud and stride must be >= 1, n_resample >= 3")
-        if self.max_depth <= 0 or self.voxel < 0 or self.seed < 0:
-            raise ValueError("max_depth must be > 0, voxel and seed >= 0")
+        validate(self)
 
 
 def on_unit_cube(points: np.ndarray) -> np.ndarray:

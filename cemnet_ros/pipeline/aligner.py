@@ -34,11 +34,11 @@ import numpy as np
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.geometry import apply_transform, se3_log
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.pair_mode import PairMode
 from cemnet_ros.pipeline.steps import preprocess, refine
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
-from cemnet_ros.pipeline.steps.basin import GicpCloud
 from cemnet_ros.pipeline.steps.contest import Contest
 from cemnet_ros.pipeline.steps.covariance import flat_covariance
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor

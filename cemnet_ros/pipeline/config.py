@@ -11,12 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from cemnet_ros.core.config import CEMConfig, GlobalSearchConfig, RegistrationConfig
-from cemnet_ros.pipeline.steps.adaptive import AdaptiveConfig
-from cemnet_ros.pipeline.steps.health import HealthConfig
-from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig
-from cemnet_ros.pipeline.steps.preprocess import SAMPLING_METHODS
-from cemnet_ros.schema import param, section
+from cemnet_ros.schema import param, section, validate
 
+SAMPLING_METHODS = ("random", "farthest")
 PRIORS = ("motion", "network", "identity")
 RECOVERY_PRIORS = ("uniform", "network")
 DERIVED = ("registration.prior",)  # set from tracking.prior: not a parameter of the pipeline
@@ -29,6 +26,71 @@ def odometry_registration() -> RegistrationConfig:
     """
     return RegistrationConfig(n_points=512, cem=CEMConfig(n_candidates=100, n_iters=2, n_fused_iters=0,
                                                           lattice_spacing=0.5))
+
+
+@dataclass
+class InputChecksConfig:
+    """Limits of the plausibility checks (docs/node.md: Input checks)."""
+
+    max_points: int = param(400_000, "more finite points than this are decimated to it, with a warning; 0 = no cap",
+                            low=0)
+    min_count_ratio: float = param(0.35, "a scan with fewer finite points than this fraction of the recent median "
+                                   "is rejected; 0 = off (with the check below)", low=0.0, high=1.0)
+    min_coverage_ratio: float = param(0.5, "... or covering fewer azimuth sectors (of 36) than this fraction of "
+                                      "the recent median", low=0.0, high=1.0)
+    level_window: int = param(20, "scans in the running point-count median", low=1, high=1000)
+    relevel_after: int = param(10, "after this many consecutive low-count scans the median restarts from them",
+                               low=1)
+    future_tolerance: float = param(10.0, "a stamp more than this (s) ahead of the node's clock is rejected; "
+                                    "0 = off", low=0.0)
+    stamp_jump: float = param(30.0, "a stamp more than this (s, and 20 periods) after the last one, or before it, "
+                              "is rejected unless the next scan confirms it; 0 = off", low=0.0)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
+@dataclass
+class AdaptiveConfig:
+    """Spreads in radians and metres; ``factor`` times the RMS prediction error, clipped to [min, max]."""
+
+    initial_rotation: float = param(0.05, "rotation spread (rad) until prediction errors have been observed",
+                                    low=1e-4, high=3.2)
+    initial_translation: float = param(0.5, "translation spread (m) until prediction errors have been observed",
+                                       low=1e-4)
+    min_rotation: float = param(0.01, "smallest rotation spread (rad)", low=1e-5, high=3.2)
+    min_translation: float = param(0.1, "smallest translation spread (m)", low=1e-5)
+    max_rotation: float = param(0.5, "largest rotation spread (rad)", low=1e-5, high=3.2)
+    max_translation: float = param(5.0, "largest translation spread (m)", low=1e-5)
+    factor: float = param(3.0, "spread = factor x the RMS of the recent prediction errors", low=1e-3)
+    window: int = param(100, "prediction errors remembered", low=1)
+
+    def __post_init__(self) -> None:
+        validate(self)
+        if self.min_rotation > self.max_rotation or self.min_translation > self.max_translation:
+            raise ValueError("adaptive spreads need min <= max")
+
+
+@dataclass
+class HealthConfig:
+    """Limits of the failure signals (fractions, metres, radians)."""
+
+    min_fitness: float = param(0.3, "inlier fraction after the polish below which a step fails", low=0.0,
+                               high=0.99)
+    fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
+                                "level", low=0.01, high=1.0)
+    confirm_ratio: float = param(0.9, "an answer that only one start reached must fit at least this fraction of "
+                                 "the running level; below it the global search competes with it (tracking) or "
+                                 "the step fails (recovery)", low=0.0, high=1.0)
+    level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
+                                low=0.0, high=0.999)
+    min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
+                                    "below which a step is degenerate (flagged, prediction kept along the free "
+                                    "direction)", low=0.0, high=0.99)
+    covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 @dataclass
@@ -47,14 +109,9 @@ class PreprocessConfig:
                          "registered at the sweep's middle, published at the stamp)")
 
     def __post_init__(self) -> None:
-        if self.sampling not in SAMPLING_METHODS:
-            raise ValueError(f"sampling must be one of {SAMPLING_METHODS}, not {self.sampling!r}")
-        if self.min_points < 3:
-            raise ValueError("min_points must be >= 3")
+        validate(self)
         if 0 < self.max_range < self.min_range:
             raise ValueError("max_range must be >= min_range (or 0 = no crop)")
-        if self.cem_radius <= 0:
-            raise ValueError("cem_radius must be > 0")
 
 
 @dataclass
@@ -71,12 +128,7 @@ class TrackingConfig:
                               "stand (false: the CEM on every step, as the method alone)")
 
     def __post_init__(self) -> None:
-        if self.prior not in PRIORS:
-            raise ValueError(f"prior must be one of {PRIORS}, not {self.prior!r}")
-        if self.identity_sigma <= 0:
-            raise ValueError("identity_sigma must be > 0")
-        if not 0.0 < self.tie_ratio <= 1.0:
-            raise ValueError("tie_ratio must lie in (0, 1]")
+        validate(self)
 
 
 @dataclass
@@ -85,6 +137,9 @@ class MapConfig:
 
     voxel_factor: float = param(3.0, "map voxel = this x the frame voxel", low=0.1)
     points_per_voxel: int = param(10, "points kept per map voxel", low=1)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 @dataclass
@@ -102,6 +157,9 @@ class PolishConfig:
     inlier_distance: float = param(2.0, "a point with a map point this close (frame voxels) ...", low=1e-3)
     inlier_residual: float = param(0.05, "... and within this of its plane (m; the sensor's noise, not the "
                                    "scene's size) counts for the fitness", low=1e-4)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 @dataclass
@@ -127,14 +185,7 @@ class RecoveryConfig:
     allow_pickle: bool = param(False, "allow loading pickled (.pth) recovery weights: only for files you trust")
 
     def __post_init__(self) -> None:
-        if self.prior not in RECOVERY_PRIORS:
-            raise ValueError(f"recovery prior must be one of {RECOVERY_PRIORS}, not {self.prior!r}")
-        if self.radius < 0 or self.gap <= 0:
-            raise ValueError("recovery radius must be >= 0, gap > 0")
-        if self.points < 32 or self.restart_after < 1:
-            raise ValueError("recovery points must be >= 32, restart_after >= 1")
-        if not 0.0 < self.ambiguity_ratio <= 1.0:
-            raise ValueError("ambiguity_ratio must lie in (0, 1]")
+        validate(self)
 
 
 @dataclass

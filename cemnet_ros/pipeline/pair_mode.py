@@ -13,9 +13,10 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
-from cemnet_ros.pipeline.steps.input_checks import InputChecks, ScanRejected
+from cemnet_ros.pipeline.steps.input_checks import InputChecks
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
 from cemnet_ros.pipeline.steps.recovery import Recovery
 from cemnet_ros.pipeline.steps.tracking import Tracker

@@ -22,10 +22,10 @@ from typing import Optional
 import numpy as np
 from tqdm import tqdm
 
+from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.node.aligner_session import AlignerSession
 from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.pipeline.node.odometry_output import OdometryOutput, aligned_points, tf_parent_child
-from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.replay.bag_io import (
     ODOMETRY,
     POINTCLOUD2,

@@ -27,13 +27,13 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 
+from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.node.aligner_session import AlignerSession, StepResult
 from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy, transform_msg_to_matrix
 from cemnet_ros.pipeline.node.node_status import NodeStatus
 from cemnet_ros.pipeline.node.pairing import PairMatcher
 from cemnet_ros.pipeline.node.scan_status import Outcome, ScanStatus
 from cemnet_ros.pipeline.node.worker import BoundedWorker
-from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.ros.outputs import NodeOutputs
 from cemnet_ros.ros.parameters import ConfigError, declare_and_read
 from cemnet_ros.ros.scans import Incoming, Scan, decode

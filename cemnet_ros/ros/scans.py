@@ -13,7 +13,8 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from cemnet_ros.pipeline.steps.input_checks import ScanRejected, stamp_ns
+from cemnet_ros.pipeline.errors import ScanRejected
+from cemnet_ros.pipeline.steps.input_checks import stamp_ns
 from cemnet_ros.pointcloud2 import CloudError, decode_scan
 
 # The encapsulation identifiers of plain CDR (XCDR1: ROS 2's) and plain XCDR2: the byte order of what follows.

@@ -16,8 +16,8 @@ import numpy as np
 from tqdm import tqdm
 
 from cemnet_ros.pipeline.config import PreprocessConfig
+from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.steps.frame import cropped, measured_scale, voxel_cloud, voxel_size
-from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.replay.bag_io import BagReader, SkippedMessage
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
 from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig, odometry_registration
-from cemnet_ros.schema import build, param, section
+from cemnet_ros.schema import build, param, section, validate
 
 from .known_motion import KnownMotionConfig
 
@@ -54,14 +54,7 @@ class ScanPairConfig:
                         "target's centroid, as the tracking CEM centres its clouds)", choices=CENTRES)
 
     def __post_init__(self) -> None:
-        if self.n_points < 32 or self.max_gap < 1:
-            raise ValueError("scans.n_points must be >= 32 and scans.max_gap >= 1")
-        if not 0.0 <= self.consecutive <= 1.0 or not 0.0 <= self.crop_deg <= 360.0:
-            raise ValueError("scans.consecutive must lie in [0, 1] and scans.crop_deg in [0, 360]")
-        if self.radius < 0 or self.noise < 0:
-            raise ValueError("scans.radius and scans.noise must be >= 0")
-        if self.centre not in CENTRES:
-            raise ValueError(f"scans.centre must be one of {CENTRES}, not {self.centre!r}")
+        validate(self)
 
 
 @dataclass
@@ -82,13 +75,13 @@ class TrainConfig:
     # Optimisation.
     epochs: int = param(50, "training epochs (paper: 50)", low=1)
     batch_size: int = param(32, "global batch (paper: 32); split evenly over DDP ranks", low=2)
-    lr: float = param(1e-4, "Adam learning rate, > 0 (paper: 1e-4)")
+    lr: float = param(1e-4, "Adam learning rate (paper: 1e-4)", low=1e-9)
     # "constant" (the paper) or "cosine": lr decays per epoch to lr / 100 at the last epoch, so that short runs
     # end with small steps and settled BatchNorm running statistics.
     lr_schedule: str = param("constant", "learning-rate schedule: 'constant' (the paper) or 'cosine' (decays per "
                              "epoch to lr / 100 at the last epoch)", choices=LR_SCHEDULES)
     weight_decay: float = param(5e-4, "Adam weight decay (paper: 5e-4)", low=0.0)
-    loss_mu: float = param(0.01, "Geman-McClure scale mu, > 0 (paper: 0.01)")
+    loss_mu: float = param(0.01, "Geman-McClure scale mu (paper: 0.01)", low=1e-6)
     prior_loss_weight: float = param(1.0, "weight of the loss on the prior alignment mu0 (paper: 1)", low=0.0)
     # The CEM inside the training graph, and the CEM used for validation (eval settings: fused reward on).
     cem: CEMConfig = section(_train_cem, "the CEM inside the training graph (no fused reward, no exploration "
@@ -106,7 +99,8 @@ class TrainConfig:
                                            "grid, CEM radius, scale = metres per network unit)")
     scans: ScanPairConfig = section(ScanPairConfig, "bag: how pairs are made from its scans")
     unseen: bool = param(False, "npz only: train on categories 0-19 (the unseen-category split)")
-    val_fraction: float = param(0.1, "share of the training shapes/scans held out for validation, in (0, 1)")
+    val_fraction: float = param(0.1, "share of the training shapes/scans held out for validation", low=0.01,
+                                 high=0.99)
     limit_train: int = param(0, "use at most this many training shapes; 0 = all", low=0)
     limit_val: int = param(0, "use at most this many validation shapes; 0 = all", low=0)
     val_every: int = param(1, "validate every k epochs (and always after the last one)", low=1)
@@ -125,34 +119,7 @@ class TrainConfig:
     progress: bool = param(True, "tqdm progress bars (rank 0 only)")
 
     def __post_init__(self) -> None:
-        if self.epochs < 1:
-            raise ValueError("epochs must be >= 1")
-        if self.seed < 0:
-            raise ValueError("seed must be >= 0")
-        if self.batch_size < 2:
-            raise ValueError("batch_size must be >= 2 (BatchNorm needs two samples per batch)")
-        if self.lr <= 0 or self.weight_decay < 0 or self.loss_mu <= 0 or self.prior_loss_weight < 0:
-            raise ValueError("need lr > 0, weight_decay >= 0, loss_mu > 0, prior_loss_weight >= 0")
-        if not 0.0 < self.val_fraction < 1.0:
-            raise ValueError("val_fraction must lie in (0, 1)")
-        if self.val_every < 1:
-            raise ValueError("val_every must be >= 1")
-        if self.lr_schedule not in LR_SCHEDULES:
-            raise ValueError(f"lr_schedule must be one of {LR_SCHEDULES}, not {self.lr_schedule!r}")
-        if self.val_batchnorm not in ("running", "batch"):
-            raise ValueError(f"val_batchnorm must be 'running' or 'batch', not {self.val_batchnorm!r}")
-        if self.objective not in OBJECTIVES:
-            raise ValueError(f"objective must be one of {OBJECTIVES}, not {self.objective!r}")
-        if self.best_metric not in BEST_METRICS:
-            raise ValueError(f"best_metric must be one of {BEST_METRICS}, not {self.best_metric!r}")
-        if self.limit_train < 0 or self.limit_val < 0:
-            raise ValueError("limit_train and limit_val must be >= 0 (0 = all)")
-        if self.max_minutes < 0:
-            raise ValueError("max_minutes must be >= 0 (0 = no budget)")
-        if self.threads < 0:
-            raise ValueError("threads must be >= 0 (0 = torch default)")
-        if self.num_workers < 0:
-            raise ValueError("num_workers must be >= 0")
+        validate(self)
         if self.data and self.bag:
             raise ValueError("give data (shapes or a folder of scans) or bag, not both")
 

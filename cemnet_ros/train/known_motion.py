@@ -16,7 +16,7 @@ import torch
 from cemnet_ros.core.geometry_torch import action_to_rt, matrix_to_euler, transform_points
 from cemnet_ros.core.network import Prediction
 from cemnet_ros.core.rewards import nearest_sq_distances
-from cemnet_ros.schema import param
+from cemnet_ros.schema import param, validate
 
 
 @dataclass
@@ -29,6 +29,9 @@ class KnownMotionConfig:
                                "source moved by mu0 and by the true motion)", low=0.0)
     sigma_weight: float = param(0.1, "weight of the Gaussian negative log-likelihood of mu0's error under sigma0",
                                 low=0.0)
+
+    def __post_init__(self) -> None:
+        validate(self)
 
 
 def known_motion_losses(source: torch.Tensor, target: torch.Tensor, rotation: torch.Tensor,

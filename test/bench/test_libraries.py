@@ -6,26 +6,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.bench import libraries
-from cemnet_ros.bench.libraries import (
-    OTHERS,
-    OURS,
-    Stage,
-    Step,
-    bench_sequence,
-    box_scan,
-    downsample_calls,
-    first_calls,
-    interleaved,
-    libraries_table,
-    local_maps,
-    nearest_calls,
-    orthonormal,
-    perturbed,
-    polish_steps,
-    startup_run,
-    timing_summary,
-)
+from cemnet_ros.bench.libraries import peers
+from cemnet_ros.bench.libraries.inputs import Stage, Step, box_scan, orthonormal, perturbed, polish_steps
+from cemnet_ros.bench.libraries.local_maps import agreement, downsample_calls, local_maps, nearest_calls
+from cemnet_ros.bench.libraries.peers import OURS, import_peers
+from cemnet_ros.bench.libraries.sequence import bench_sequence
+from cemnet_ros.bench.libraries.startup import first_calls, startup_run
+from cemnet_ros.bench.libraries.table import libraries_table
+from cemnet_ros.bench.libraries.timing import OTHERS, interleaved, timing_summary
 from cemnet_ros.bench.metrics import relative_error
 from cemnet_ros.bench.real import Sequence
 from cemnet_ros.core.geometry import apply_transform, rigid_transform
@@ -108,7 +96,7 @@ def test_ours_downsample_and_nearest_agree_with_plain_numpy_and_scipy():
     query = box_scan(2000, seed=5)
     distances = {name: call() for name, call in nearest_calls(ours.map, query, 0.3, {}, build_times).items()}
     assert set(distances) == {OURS, "scipy"} and set(build_times) == {"scipy", OTHERS}
-    assert libraries.agreement(distances[OURS], distances["scipy"]) == 1.0
+    assert agreement(distances[OURS], distances["scipy"]) == 1.0
 
 
 def test_ours_polish_finds_the_true_motion():
@@ -117,8 +105,8 @@ def test_ours_polish_finds_the_true_motion():
 
 
 def test_a_missing_peer_is_left_out(monkeypatch):
-    monkeypatch.setitem(libraries.PEER_MODULES, "absent_peer", ("no_such_module_for_this_test",))
-    assert libraries.import_peers(("absent_peer",)) == {}
+    monkeypatch.setitem(peers.PEER_MODULES, "absent_peer", ("no_such_module_for_this_test",))
+    assert import_peers(("absent_peer",)) == {}
 
 
 def test_bench_sequence_and_its_table_with_ours_alone():
@@ -156,12 +144,12 @@ def test_small_gicp_downsample_and_nearest_match_ours():
     ours = local_maps({}, AlignerConfig(), VOXEL, 100.0)[OURS]
     ours.insert(scan, np.eye(4))
     calls = nearest_calls(ours.map, box_scan(2000, seed=5), 0.3, peers, {})
-    assert libraries.agreement(calls[OURS](), calls["small_gicp"]()) == 1.0
+    assert agreement(calls[OURS](), calls["small_gicp"]()) == 1.0
 
 
 def test_kiss_icp_method_finds_the_true_motion():
     pytest.importorskip("kiss_icp.registration")
-    peers = libraries.import_peers(("kiss_icp",))
+    peers = import_peers(("kiss_icp",))
     grid = downsample_calls(box_scan(5000), VOXEL, peers)["kiss_icp"]()
     assert grid.shape[1] == 3 and 0 < len(grid) <= 5000
     rte, rre = _polished(local_maps(peers, AlignerConfig(), VOXEL, 100.0)["kiss_icp p2p"],

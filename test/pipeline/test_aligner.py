@@ -5,14 +5,14 @@ import dataclasses
 
 import numpy as np
 import pytest
+from street_scene import make_transform, make_world, street_scan
 
 from cemnet_ros.bench.metrics import relative_error, within
 from cemnet_ros.core import CEMConfig, RegistrationConfig
-from cemnet_ros.data.street import make_transform, make_world, street_scan
 from cemnet_ros.pipeline.aligner import ScanAligner
-from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig, TrackingConfig
+from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig, PreprocessConfig, TrackingConfig
+from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.steps.contest import Contest
-from cemnet_ros.pipeline.steps.input_checks import InputChecksConfig, ScanRejected
 from cemnet_ros.pipeline.steps.preprocess import (
     robust_radius,
 )

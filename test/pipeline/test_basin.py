@@ -1,9 +1,10 @@
 """The polish's wide stage (cemnet_ros.pipeline.steps.basin): GICP from afar, in the frame its target is placed in."""
 import numpy as np
+from street_scene import make_transform
 
 from cemnet_ros.bench.metrics import relative_error
-from cemnet_ros.data.street import make_transform
-from cemnet_ros.pipeline.steps.basin import gicp, gicp_cloud
+from cemnet_ros.pipeline.map.gicp_cloud import gicp_cloud
+from cemnet_ros.pipeline.steps.basin import gicp
 
 
 def room(rng, n=6000):

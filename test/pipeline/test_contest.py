@@ -4,10 +4,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from street_scene import make_transform
 
-from cemnet_ros.data.street import make_transform
+from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.contest import Contest, Origin, distinct
-from cemnet_ros.pipeline.steps.health import HealthConfig, HealthMonitor, Signals
+from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals
 from cemnet_ros.pipeline.steps.refine import PolishResult
 from cemnet_ros.pipeline.steps.verdict import Estimate
 

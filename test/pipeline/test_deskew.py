@@ -14,7 +14,8 @@ from sensor_msgs.msg import PointCloud2, PointField
 from cemnet_ros.core.geometry import se3_log
 from cemnet_ros.data.scenes import LidarModel
 from cemnet_ros.data.skewed import circle_poses, skewed_sequence
-from cemnet_ros.pipeline.steps.deskew import TimeFieldError, deskew, normalize_point_times
+from cemnet_ros.pipeline.steps.deskew import deskew
+from cemnet_ros.point_times import TimeFieldError, normalize_point_times
 from cemnet_ros.pointcloud2 import CloudError, decode_point_times, decode_xyz
 
 STAMP_NS = 1_700_000_000_123_456_789  # an epoch stamp: absolute times are ~1.7e9 s

@@ -1,9 +1,10 @@
 """Adaptive spread, failure signals, Hessian covariance and degenerate directions (no engine needed)."""
 import numpy as np
 import pytest
+from street_scene import make_transform
 
-from cemnet_ros.data.street import make_transform
-from cemnet_ros.pipeline.steps.adaptive import AdaptiveConfig, AdaptiveSpread
+from cemnet_ros.pipeline.config import AdaptiveConfig, HealthConfig
+from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.covariance import (
     MIN_STD_ROTATION,
     Conditioning,
@@ -11,7 +12,7 @@ from cemnet_ros.pipeline.steps.covariance import (
     flat_covariance,
     keep_prediction_along,
 )
-from cemnet_ros.pipeline.steps.health import HealthConfig, HealthMonitor, Signals
+from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals
 
 GOOD = Signals(fitness=0.8, disagreement_m=0.05, disagreement_rad=0.005, conditioning=0.3, spread_m=0.1)
 

@@ -7,8 +7,9 @@ import pytest
 from cemnet_ros.core import CEMConfig, RegistrationConfig
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, raycast, synthetic_trajectory
 from cemnet_ros.pipeline.aligner import ScanAligner
-from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.steps.input_checks import InputChecks, InputChecksConfig, ScanRejected, stamp_ns
+from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig
+from cemnet_ros.pipeline.errors import ScanRejected
+from cemnet_ros.pipeline.steps.input_checks import InputChecks, stamp_ns
 from cemnet_ros.pointcloud2 import FLOAT32, decode_scan
 
 PERIOD = 100_000_000  # 10 Hz

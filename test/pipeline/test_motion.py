@@ -1,7 +1,7 @@
 """The constant-velocity motion model."""
 import numpy as np
+from street_scene import make_transform
 
-from cemnet_ros.data.street import make_transform
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity, se3_power
 
 

@@ -8,11 +8,11 @@ beyond the polish's basin go through the global search, whose hypotheses compete
 """
 import numpy as np
 from shared_data import KITTI, requires_shared
+from street_scene import make_transform
 
 from cemnet_ros.bench.metrics import relative_error
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.data.kitti import kitti_scans
-from cemnet_ros.data.street import make_transform
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.steps.frame import Preprocessor

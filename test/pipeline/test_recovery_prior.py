@@ -32,7 +32,7 @@ bench = _load_bench()
 
 def test_recovery_prior_is_validated():
     assert RecoveryConfig().prior == "uniform" and RecoveryConfig().weights == "scan"  # used once switched on
-    with pytest.raises(ValueError, match="recovery prior"):
+    with pytest.raises(ValueError, match="RecoveryConfig.prior must be one of"):
         RecoveryConfig(prior="magic")
     with pytest.raises(ValueError, match="must be one of"):
         build(AlignerConfig(), {"recovery.prior": "magic"})

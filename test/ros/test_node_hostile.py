@@ -10,10 +10,10 @@ import pytest
 from builtin_interfaces.msg import Time
 from node_harness import WORLD, Harness, pose_of, wait_for
 from sensor_msgs.msg import PointCloud2, PointField
+from street_scene import make_transform
 
 from cemnet_ros.bench.metrics import relative_error
 from cemnet_ros.data.hostile import corpus
-from cemnet_ros.data.street import make_transform
 from cemnet_ros.pointcloud2 import make_pointcloud2
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow]

@@ -9,10 +9,11 @@ from cemnet_ros.data.shapes import bracket_shape
 from cemnet_ros.io.pointcloud_files import write_ply
 
 core = pytest.importorskip("cemnet_ros.core.registration", reason="the CEMNet core is absent")
+from cemnet_ros.align_clouds import engine_scale  # noqa: E402
 from cemnet_ros.core.checkpoint import DEFAULT_WEIGHTS, save_weights  # noqa: E402
 from cemnet_ros.core.network import SamplingNetwork  # noqa: E402
 from cemnet_ros.tools import bench_cli, eval_cli, register_cli  # noqa: E402
-from cemnet_ros.tools.register_cli import resolve_scale  # noqa: E402
+from cemnet_ros.tools.register_cli import parsed_scale  # noqa: E402
 
 SMALL_CEM = ["--cem.n_candidates", "100", "--cem.n_iters", "3"]
 
@@ -115,6 +116,7 @@ def test_register_two_files_recovers_transform(tmp_path, capsys):
     out = capsys.readouterr().out
     transform = _parse_matrix(out)
     assert transform.shape == (4, 4) and "fitness" in out and "sigma" in out
+    assert "method: engine" in out  # an object-scale cloud: the paper's engine, as before
     np.testing.assert_allclose(transform[3], [0, 0, 0, 1])
     angle = np.degrees(np.arccos(np.clip((np.trace(r.T @ transform[:3, :3]) - 1) / 2, -1, 1)))
     assert angle < 2.0 and np.linalg.norm(transform[:3, 3] - t) < 0.03
@@ -122,19 +124,19 @@ def test_register_two_files_recovers_transform(tmp_path, capsys):
 
 def test_register_scale_handling(tmp_path, capsys):
     small = bracket_shape(256, seed=1).astype(np.float64)
-    assert resolve_scale("auto", small, small) == 1.0
+    assert engine_scale(small, small) == 1.0
     big = small * 40.0
-    assert 20.0 < resolve_scale("auto", big, big) <= 40.0
-    assert resolve_scale("2.5", big, big) == 2.5
+    assert 20.0 < engine_scale(big, big) <= 40.0
+    assert parsed_scale("2.5") == 2.5 and parsed_scale("auto") is None
     with pytest.raises(ValueError, match="positive"):
-        resolve_scale("-1", big, big)
-    # scaled clouds: identity prior + tiny CEM; the printed translation is in the clouds' units
+        parsed_scale("-1")
+    # scaled clouds, the engine forced: identity prior + tiny CEM; the printed translation is in the clouds' units
     write_ply(tmp_path / "a.ply", big)
     write_ply(tmp_path / "b.ply", big + np.array([4.0, 0.0, 0.0]))
-    assert register_cli.main([str(tmp_path / "a.ply"), str(tmp_path / "b.ply"), "--prior", "identity",
-                              "--scale", "40", "--json", str(tmp_path / "out" / "r.json"), *SMALL_CEM]) == 0
+    assert register_cli.main([str(tmp_path / "a.ply"), str(tmp_path / "b.ply"), "--mode", "engine", "--prior",
+                              "identity", "--scale", "40", "--json", str(tmp_path / "out" / "r.json"), *SMALL_CEM]) == 0
     printed = capsys.readouterr().out
-    assert "scale 40" in printed
+    assert "scale 40" in printed and "method: engine" in printed
     result = json.loads((tmp_path / "out" / "r.json").read_text())  # the printed figures, in JSON
     assert result["scale"] == 40.0 and np.asarray(result["T_target_source"]).shape == (4, 4)
     np.testing.assert_allclose(_parse_matrix(printed), result["T_target_source"], atol=1e-6)

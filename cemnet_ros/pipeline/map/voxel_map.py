@@ -19,10 +19,10 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
+from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.map.voxel_hash import EMPTY, insert_points, prune_far_voxels, rehash
 from cemnet_ros.pipeline.map.voxel_normals import NORMAL_RADIUS, estimate_normals
 from cemnet_ros.pipeline.map.voxel_query import nearest_batch, slots_within
-from cemnet_ros.pipeline.steps.basin import GicpCloud, gicp_cloud
 
 
 class VoxelMap:

@@ -8,34 +8,11 @@ doubles the motion the prediction extrapolates).
 from __future__ import annotations
 
 import collections
-from dataclasses import dataclass
 
 import numpy as np
 
 from cemnet_ros.core.geometry import rotation_angle_rad
-from cemnet_ros.schema import param
-
-
-@dataclass
-class AdaptiveConfig:
-    """Spreads in radians and metres; ``factor`` times the RMS prediction error, clipped to [min, max]."""
-
-    initial_rotation: float = param(0.05, "rotation spread (rad) until prediction errors have been observed",
-                                    low=1e-4, high=3.2)
-    initial_translation: float = param(0.5, "translation spread (m) until prediction errors have been observed",
-                                       low=1e-4)
-    min_rotation: float = param(0.01, "smallest rotation spread (rad)", low=1e-5, high=3.2)
-    min_translation: float = param(0.1, "smallest translation spread (m)", low=1e-5)
-    max_rotation: float = param(0.5, "largest rotation spread (rad)", low=1e-5, high=3.2)
-    max_translation: float = param(5.0, "largest translation spread (m)", low=1e-5)
-    factor: float = param(3.0, "spread = factor x the RMS of the recent prediction errors", low=1e-3)
-    window: int = param(100, "prediction errors remembered", low=1)
-
-    def __post_init__(self) -> None:
-        if not 0 < self.min_rotation <= self.max_rotation or not 0 < self.min_translation <= self.max_translation:
-            raise ValueError("adaptive spreads need 0 < min <= max")
-        if self.initial_rotation <= 0 or self.initial_translation <= 0 or self.factor <= 0 or self.window < 1:
-            raise ValueError("initial spreads, factor and window must be > 0")
+from cemnet_ros.pipeline.config import AdaptiveConfig
 
 
 class AdaptiveSpread:

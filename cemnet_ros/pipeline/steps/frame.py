@@ -13,9 +13,9 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig
+from cemnet_ros.pipeline.errors import ScanRejected
+from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
-from cemnet_ros.pipeline.steps.basin import GicpCloud, gicp_cloud
-from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.pipeline.steps.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
 
 LOST_RESCALE_RATIO = 2.0  # a lost trajectory measures the auto scale again on a scan this much larger or smaller

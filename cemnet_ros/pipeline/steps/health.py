@@ -19,36 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cemnet_ros.core.geometry import rotation_angle_rad
-from cemnet_ros.schema import param
-
-
-@dataclass
-class HealthConfig:
-    """Limits of the failure signals (fractions, metres, radians)."""
-
-    min_fitness: float = param(0.3, "inlier fraction after the polish below which a step fails", low=0.0,
-                               high=0.99)
-    fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
-                                "level", low=0.01, high=1.0)
-    confirm_ratio: float = param(0.9, "an answer that only one start reached must fit at least this fraction of "
-                                 "the running level; below it the global search competes with it (tracking) or "
-                                 "the step fails (recovery)", low=0.0, high=1.0)
-    level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
-                                low=0.0, high=0.999)
-    min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
-                                    "below which a step is degenerate (flagged, prediction kept along the free "
-                                    "direction)", low=0.0, high=0.99)
-    covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.min_fitness < 1.0 or not 0.0 < self.fitness_drop <= 1.0:
-            raise ValueError("min_fitness must lie in [0, 1) and fitness_drop in (0, 1]")
-        if not 0.0 <= self.level_memory < 1.0:
-            raise ValueError("level_memory must lie in [0, 1)")
-        if not 0.0 <= self.min_conditioning < 1.0:
-            raise ValueError("min_conditioning must lie in [0, 1)")
-        if self.covariance_inflation < 1.0:
-            raise ValueError("covariance_inflation must be >= 1")
+from cemnet_ros.pipeline.config import HealthConfig
 
 
 @dataclass

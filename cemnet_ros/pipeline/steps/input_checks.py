@@ -27,39 +27,13 @@ from typing import Optional
 
 import numpy as np
 
-from cemnet_ros.schema import param
+from cemnet_ros.pipeline.config import InputChecksConfig
+from cemnet_ros.pipeline.errors import ScanRejected
 
 SECTORS = 36  # azimuth bins of the coverage check
 COVERAGE_SAMPLES = 16384  # points the coverage is counted on (a share per sector needs no more)
 EARLY_LEVEL = 3  # a level from fewer scans than this may rest on an implausible start
 UPWARD_RATIO = 4.0  # ... which shows as the next scan having this many times the points
-
-
-class ScanRejected(ValueError):
-    """A scan that cannot be aligned; the aligner state is unchanged. ``kind`` names the check (for counting)."""
-
-    def __init__(self, message: str, kind: str = "preprocessing") -> None:
-        super().__init__(message)
-        self.kind = kind
-
-
-@dataclass
-class InputChecksConfig:
-    """Limits of the plausibility checks (docs/node.md: Input checks)."""
-
-    max_points: int = param(400_000, "more finite points than this are decimated to it, with a warning; 0 = no cap",
-                            low=0)
-    min_count_ratio: float = param(0.35, "a scan with fewer finite points than this fraction of the recent median "
-                                   "is rejected; 0 = off (with the check below)", low=0.0, high=1.0)
-    min_coverage_ratio: float = param(0.5, "... or covering fewer azimuth sectors (of 36) than this fraction of "
-                                      "the recent median", low=0.0, high=1.0)
-    level_window: int = param(20, "scans in the running point-count median", low=1, high=1000)
-    relevel_after: int = param(10, "after this many consecutive low-count scans the median restarts from them",
-                               low=1)
-    future_tolerance: float = param(10.0, "a stamp more than this (s) ahead of the node's clock is rejected; "
-                                    "0 = off", low=0.0)
-    stamp_jump: float = param(30.0, "a stamp more than this (s, and 20 periods) after the last one, or before it, "
-                              "is rejected unless the next scan confirms it; 0 = off", low=0.0)
 
 
 @dataclass

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from cemnet_ros.core.jit import kernel
+from cemnet_ros.pipeline.config import SAMPLING_METHODS
 
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: multiply, keep the top bits
-SAMPLING_METHODS = ("random", "farthest")
 
 
 def finite_points(points: np.ndarray) -> np.ndarray:

@@ -17,10 +17,10 @@ from typing import Callable, Optional
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform, se3_exp
+from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.deskew import deskew
 from cemnet_ros.pipeline.steps.frame import Preprocessor
-from cemnet_ros.pipeline.steps.input_checks import ScanRejected
 from cemnet_ros.pipeline.steps.verdict import AlignmentStep
 
 SkewedScan = tuple[np.ndarray, np.ndarray]  # points, times relative to the reference (s)

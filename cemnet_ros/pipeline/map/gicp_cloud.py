@@ -1,0 +1,36 @@
+"""A scan as small_gicp aligns it: thinned to a voxel, with each point's covariance and a KD-tree (metres).
+
+The map keeps its last scan so (:attr:`~.voxel_map.VoxelMap.last_scan`), the target of the polish's basin stage
+(:mod:`cemnet_ros.pipeline.steps.basin`). Single-threaded on purpose: small_gicp splits its parallel work
+dynamically, so its rounding, and with it the trajectory, would change with the machine's load.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import small_gicp
+
+THREADS = 1  # deterministic sums (see above)
+NEIGHBOURS = 10  # points of each local distribution (small_gicp's default)
+
+
+@dataclass
+class GicpCloud:
+    """A cloud thinned to a voxel, with its points' covariances and its KD-tree (small_gicp's types), in its own
+    frame, and ``pose``: that frame in the frame it is aligned in (a map's last scan: T_map_scan)."""
+
+    points: small_gicp.PointCloud
+    tree: small_gicp.KdTree
+    pose: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def placed(self, pose: np.ndarray) -> "GicpCloud":
+        """The same cloud at ``pose`` (no copy of the points: a scan kept by the map where it was inserted)."""
+        return replace(self, pose=np.asarray(pose, dtype=np.float64).copy())
+
+
+def gicp_cloud(points: np.ndarray, voxel: float) -> GicpCloud:
+    """``points`` (n, 3) thinned to ``voxel`` (m), with covariances from their ``NEIGHBOURS`` nearest."""
+    cloud, tree = small_gicp.preprocess_points(np.ascontiguousarray(points, dtype=np.float64), float(voxel),
+                                               num_neighbors=NEIGHBOURS, num_threads=THREADS)
+    return GicpCloud(cloud, tree)
