@@ -26,7 +26,7 @@ setup(
         "numpy>=1.24",
         "scipy>=1.10",
         "numba>=0.59",
-        "small-gicp>=1.0",  # GICP: the wide stage of the polish (cemnet_ros/pipeline/steps/basin.py)
+        "small-gicp>=1.0",  # GICP: the wide stage of the polish (cemnet_ros/pipeline/steps/basin.py, map/gicp_cloud.py)
         # The CPU wheel is pinned in requirements.txt (torch==2.13.0); an unpinned install pulls a CUDA build.
         "torch>=2.2",
         "tqdm>=4.60",

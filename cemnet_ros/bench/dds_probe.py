@@ -30,6 +30,7 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
 from cemnet_ros.data.shared import REPO, SHARED
+from cemnet_ros.pipeline.node.extrinsic import pose_msg_to_matrix
 from cemnet_ros.ros.scans import HEADER_STAMP_OFFSET
 
 PROFILE = REPO / "config" / "fastdds_large_data.xml"
@@ -126,6 +127,7 @@ class Probe:
                          ReliabilityPolicy.BEST_EFFORT)
         self.pub = node.create_publisher(PointCloud2, f"{namespace}/points", qos)
         self.odometry: list[tuple[float, int]] = []  # (arrival, stamp_ns)
+        self.poses: dict[int, np.ndarray] = {}  # stamp_ns -> the odometry's pose T_odom_base
         self.verdicts: list[Verdict] = []
         self.diagnostics: dict = {}
         self._name = f"{namespace}/align_node"
@@ -140,7 +142,9 @@ class Probe:
 
     def _on_odometry(self, msg: Odometry) -> None:
         stamp = msg.header.stamp
-        self.odometry.append((time.monotonic(), stamp.sec * 10 ** 9 + stamp.nanosec))
+        stamp_ns = stamp.sec * 10 ** 9 + stamp.nanosec
+        self.odometry.append((time.monotonic(), stamp_ns))
+        self.poses[stamp_ns] = pose_msg_to_matrix(msg.pose.pose)
 
     def _on_verdict(self, msg: DiagnosticStatus) -> None:
         values = {kv.key: kv.value for kv in msg.values}

@@ -93,6 +93,6 @@ def live_table(rows: list[dict[str, Any]]) -> str:
         rate = "offline" if r["rate"] is None else f"{r['rate']:g}x"
         latency = " / ".join(f(r.get(f"latency_ms_p{q}")) for q in (50, 95, 99))
         out.append(f"| {r['sequence']} | {r['method']} | {rate} | {r['processed']} / {r['scans']} | "
-                   f"{r['behind']} | {latency} | {f(r['ms_p50'])} / {f(r['ms_p95'])} | {f(r['ate_m'], '.3f')} | "
+                   f"{f(r['behind'])} | {latency} | {f(r['ms_p50'])} / {f(r['ms_p95'])} | {f(r['ate_m'], '.3f')} | "
                    f"{f(r['end_drift_pct'], '.2f')} | {r['off_accepted']} / {r['off_flagged']} |")
     return "\n".join(out)

@@ -140,7 +140,7 @@ class ScanAligner:
         self._checks.passed(admitted)
         if before is not None and self._last_stamp is not None and self._last_stamp != before:
             self._last_dt_ns = self._last_stamp - before  # the motion model's last time step
-        step.warnings = admitted.warnings
+        step.warnings, step.effort = admitted.warnings, effort
         return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._velocity, self._motion.has_velocity)
 
     def _process_at(self, points: np.ndarray, stamp_ns: int, start: float, effort: float) -> AlignmentStep:
@@ -184,7 +184,7 @@ class ScanAligner:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
         self._map = self._preprocessor.new_map()
         self._map.update(apply_transform(T_odom_sensor, frame.dense), T_odom_sensor[:3, 3],
-                         self._scan_cloud(frame, self._map.voxel_size, T_odom_sensor))
+                         self._scan_cloud(frame, self._map.gicp_voxel, T_odom_sensor))
         self._T_odom_last_insert = T_odom_sensor.copy()
         self._sweep.map_restarted(T_odom_sensor)
         self._health.reset()
@@ -213,8 +213,7 @@ class ScanAligner:
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
                              len(frame.sampled), "" if estimate.accepted else "; ".join(reasons),
                              estimate.recovered, why_recovered, estimate.degenerate, estimate.signals.as_dict(),
-                             origin=estimate.published_origin, effort=contest.polisher.effort,
-                             polishes=contest.polishes)
+                             origin=estimate.published_origin, polishes=contest.polishes)
 
     def _failed(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate) -> list[str]:
         """A step that cannot be vouched for: the next scan recovers; too many in a row restart the map."""
@@ -238,7 +237,7 @@ class ScanAligner:
             self._spread.update(np.linalg.inv(T_predicted) @ pose)
         self._health.accept(estimate.signals.fitness)
         self._map.update(apply_transform(pose, frame.dense), pose[:3, 3],
-                         self._scan_cloud(frame, self._map.voxel_size, pose))
+                         self._scan_cloud(frame, self._map.gicp_voxel, pose))
         self._T_odom_last_insert = pose.copy()
         self._sweep.inserted(pose)
 

@@ -45,7 +45,8 @@ PIPELINE = parameters(AlignerConfig(), exclude=DERIVED)  # the flags and params-
 # others (topics, QoS, queue) mean nothing without DDS. Flags as for the pipeline; --config gives them too.
 NODE = {name: p for name, p in parameters(NodeConfig()).items() if name in (
     "odom_frame", "base_frame", "base_to_sensor", "covariance_mode", "fixed_position_variance",
-    "fixed_orientation_variance", "publish_tf", "invert_tf", "publish_aligned_cloud", "aligned_cloud_voxel")}
+    "fixed_orientation_variance", "publish_tf", "invert_tf", "publish_aligned_cloud", "aligned_cloud_voxel",
+    "queue_size", "behind_effort")}  # the last two: the node's queue, with --realtime
 
 
 # ---------------------------------------------------------------------------------------------- config

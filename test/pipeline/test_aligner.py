@@ -333,3 +333,30 @@ def test_a_replay_gives_the_same_trajectory_every_time_and_with_any_thread_count
     finally:
         numba.set_num_threads(threads[0])
         torch.set_num_threads(threads[1])
+
+
+def test_a_scan_processed_behind_gets_the_effort_share_of_the_polish_and_search_budgets(monkeypatch):
+    from cemnet_ros.pipeline.steps import polish, recovery
+
+    budgets = {"polish": [], "search": []}
+    original_icp, original_search = polish.point_to_plane_icp, recovery.global_search
+
+    def icp(*args, **kwargs):
+        budgets["polish"].append(args[4])
+        return original_icp(*args, **kwargs)
+
+    def search(*args, **kwargs):
+        budgets["search"].append(args[4].n_scatter)
+        return original_search(*args, **kwargs)
+
+    monkeypatch.setattr(polish, "point_to_plane_icp", icp)
+    monkeypatch.setattr(recovery, "global_search", search)
+    aligner = ScanAligner(FAST)
+    poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(3)]
+    rng = np.random.default_rng(2)
+    steps = [aligner.process(street_scan(WORLD, p, rng), k * PERIOD, effort=e) for k, (p, e)
+             in enumerate(zip(poses, (1.0, 0.5, 1.0)))]
+    assert [s.effort for s in steps] == [1.0, 0.5, 1.0] and all(s.accepted for s in steps)
+    full, half = FAST.polish.iters, round(0.5 * FAST.polish.iters)
+    assert budgets["search"] == [FAST.recovery.search.n_scatter // 2]  # the first pair ran behind
+    assert set(budgets["polish"]) == {full, half}

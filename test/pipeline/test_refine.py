@@ -117,3 +117,34 @@ def test_a_single_plane_moves_only_what_it_constrains():
     result = point_to_plane_icp(map_of(plane), plane[::5], start, 1.0, 10)
     np.testing.assert_allclose(result.T_target_source[:3, 3], [0.1, 0.2, 0.0], atol=1e-9)
     assert np.sum(np.linalg.eigvalsh(result.hessian) > 1e-6) == 3
+
+
+def test_a_coarse_stride_reaches_the_same_answer_and_reports_the_information_of_every_point():
+    world = make_world(n=20000)
+    voxel_map = map_of(world)
+    truth = make_transform(yaw=0.02, t=(0.3, -0.1, 0.05))
+    source = seen_from(world, truth)[::4]
+    start = truth @ make_transform(yaw=np.radians(1.5), t=(0.12, 0.05, -0.03), roll=0.005)
+    full = point_to_plane_icp(voxel_map, source, start, 1.0, 30)
+    strided = point_to_plane_icp(voxel_map, source, start, 1.0, 30, coarse_stride=4)
+    assert within_mm(strided.T_target_source, full.T_target_source) and within_mm(strided.T_target_source, truth, 5)
+    hessian, _, variance, n_pairs = brute_force_normal_equations(voxel_map, source, strided.T_target_source, 1.0,
+                                                                 1.0 / 3.0)
+    np.testing.assert_allclose(strided.hessian, hessian, rtol=1e-9, atol=1e-9)  # all points, not the stride's
+    assert strided.n_pairs == n_pairs > 4000
+
+
+def test_a_budget_spent_on_the_stride_still_ends_on_every_point():
+    world = make_world(n=20000)
+    voxel_map = map_of(world)
+    truth = make_transform(yaw=0.02, t=(0.3, -0.1, 0.05))
+    source = seen_from(world, truth)[::4]
+    result = point_to_plane_icp(voxel_map, source, truth @ make_transform(t=(0.2, 0.0, 0.0)), 1.0, 1,
+                                coarse_stride=4)
+    _, _, _, n_pairs = brute_force_normal_equations(voxel_map, source, result.T_target_source, 1.0, 1.0 / 3.0)
+    assert result.iterations == 1 and result.n_pairs == n_pairs
+
+
+def within_mm(T_a, T_b, mm=1.0):
+    metres, degrees = relative_error(T_a, T_b)
+    return metres < mm * 1e-3 and degrees < 0.05

@@ -54,6 +54,20 @@ def test_replay_tiny_bag_small_cem(tiny_bag, tmp_path, capsys):
     assert abs(low0 - low3) < 0.05
 
 
+def test_a_realtime_replay_drops_what_the_node_queue_would_and_scores_what_came_out(tiny_bag, tmp_path, capsys):
+    out = tmp_path / "live"
+    # 10000x: the 4 scans arrive within 0.04 ms, so the first one's registration holds up the others; a queue
+    # of 2 keeps the newest two, and the first of them starts behind the last
+    assert main([str(tiny_bag), "--out", str(out), "--quiet", "--no-plot", "--registration.cem.n_candidates", "100",
+                 "--realtime", "10000", "--queue_size", "2", "--behind_effort", "0.25"]) == 0
+    assert "live at 10000x" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    live = summary["live"]
+    assert (live["scans"], live["processed"], live["dropped"], live["behind"]) == (4, 3, 1, 1)
+    assert summary["scans"] == 3 and summary["accuracy"]["matched"] == 3 and live["latency_ms_p50"] > 0
+    assert [(s["index"], s["effort"]) for s in summary["steps"]] == [(0, 1.0), (2, 0.25), (3, 1.0)]
+
+
 def test_replay_without_ground_truth_reports_speed_only(tmp_path, capsys):
     rng = np.random.default_rng(0)
     base = rng.uniform(-5, 5, size=(3000, 3))

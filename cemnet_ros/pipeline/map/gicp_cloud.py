@@ -13,6 +13,7 @@ import small_gicp
 
 THREADS = 1  # deterministic sums (see above)
 NEIGHBOURS = 10  # points of each local distribution (small_gicp's default)
+GICP_VOXELS = 2.0  # map voxels: the clouds GICP aligns are this coarse (it finds a basin; the fine polish refines)
 
 
 @dataclass

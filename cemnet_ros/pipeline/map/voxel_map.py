@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud, gicp_cloud
+from cemnet_ros.pipeline.map.gicp_cloud import GICP_VOXELS, GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.map.voxel_hash import EMPTY, insert_points, prune_far_voxels, rehash
 from cemnet_ros.pipeline.map.voxel_normals import NORMAL_RADIUS, estimate_normals
 from cemnet_ros.pipeline.map.voxel_query import nearest_batch, slots_within
@@ -52,6 +52,11 @@ class VoxelMap:
         self._dense: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = None
         self._last_scan: Optional[GicpCloud] = None
         self._make_last_scan: Optional[Callable[[], GicpCloud]] = None
+
+    @property
+    def gicp_voxel(self) -> float:
+        """The voxel its last scan is thinned to for GICP (:mod:`.gicp_cloud`), m."""
+        return GICP_VOXELS * self.voxel_size
 
     def __len__(self) -> int:
         return self._n_points
@@ -115,7 +120,7 @@ class VoxelMap:
         self._n_points = int(self._counts[:self._n_voxels].sum())
         self._dense = None
         self._last_scan = None
-        self._make_last_scan = scan or (lambda: gicp_cloud(points, self.voxel_size))
+        self._make_last_scan = scan or (lambda: gicp_cloud(points, self.gicp_voxel))
 
     def nearest(self, query: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray]:
         """(n,) distances (inf if none within ``max_distance``) and (n,) indices into :attr:`points` (-1)."""

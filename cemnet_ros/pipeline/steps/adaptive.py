@@ -30,20 +30,18 @@ class AdaptiveSpread:
         self._errors.append((rotation_angle_rad(T_predicted_actual[:3, :3]),
                              float(np.linalg.norm(T_predicted_actual[:3, 3]))))
 
-    def expected_error(self, dt_ratio: float = 1.0) -> tuple[float, float]:
-        """(rotation rad, translation m): how far the prediction is likely off, the RMS of the recent errors
-        (before any: the initial spreads / factor), stretched by ``dt_ratio`` = dt / usual dt."""
-        c = self.config
-        if not self._errors:
-            rms = np.array([c.initial_rotation, c.initial_translation]) / c.factor
-        else:
-            rms = np.sqrt(np.mean(np.square(np.asarray(self._errors)), axis=0))
-        stretch = max(1.0, float(dt_ratio))
-        return float(rms[0] * stretch), float(rms[1] * stretch)
+    def recent_errors(self, n: int) -> np.ndarray:
+        """The last ``n`` recorded prediction errors, (k, 2) rows of (rotation rad, translation m), k <= n."""
+        return np.asarray(list(self._errors)[-n:], dtype=np.float64).reshape(-1, 2)
 
     def spread(self, dt_ratio: float = 1.0) -> tuple[float, float]:
-        """(rotation rad, translation m) to search around the prediction: ``factor`` x :meth:`expected_error`."""
+        """(rotation rad, translation m) to search around the prediction; ``dt_ratio`` = dt / usual dt."""
         c = self.config
-        rotation, translation = self.expected_error(dt_ratio)
-        return (float(np.clip(c.factor * rotation, c.min_rotation, c.max_rotation)),
-                float(np.clip(c.factor * translation, c.min_translation, c.max_translation)))
+        if not self._errors:
+            rotation, translation = c.initial_rotation, c.initial_translation
+        else:
+            rms = np.sqrt(np.mean(np.square(np.asarray(self._errors)), axis=0))
+            rotation, translation = c.factor * rms[0], c.factor * rms[1]
+        stretch = max(1.0, float(dt_ratio))
+        return (float(np.clip(rotation * stretch, c.min_rotation, c.max_rotation)),
+                float(np.clip(translation * stretch, c.min_translation, c.max_translation)))

@@ -22,6 +22,7 @@ from cemnet_ros.pipeline.steps.health import disagreement
 from cemnet_ros.pipeline.steps.refine import PolishResult, point_to_plane_icp
 
 FINE_DISTANCE = 2.0  # frame voxels: the fine polish's pairing distance, and its reach
+BASIN_SETTLED = 0.1  # frame voxels: the basin stage ends once a step moves less (the fine polish does the rest)
 
 
 def map_sample(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_guess: np.ndarray, n: int,
@@ -58,8 +59,10 @@ class Polisher:
         cfg = self.config.polish
         if self.map.last_scan is None:
             return T_start
-        return gicp(self.map.last_scan, self.frame.gicp_cloud(self.map.voxel_size), T_start,
-                    cfg.wide_distance * self.frame.polish_voxel, max(1, round(self.effort * cfg.wide_iters)))
+        settled_m = BASIN_SETTLED * self.frame.polish_voxel
+        return gicp(self.map.last_scan, self.frame.gicp_cloud(self.map.gicp_voxel), T_start,
+                    cfg.wide_distance * self.frame.polish_voxel, max(1, round(self.effort * cfg.wide_iters)),
+                    (settled_m, settled_m / self.frame.length))
 
     def wide(self, T_start: np.ndarray) -> PolishResult:
         """:meth:`basin`, then :meth:`fine`: for a start that may be a metre or degrees off."""

@@ -27,7 +27,7 @@ N_CHUNKS = 32  # partial sums; a fixed count: the sums do not depend on the thre
 N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs
 UPPER = np.triu_indices(6)  # the kernel's order of the J^T W J entries
 DAMPING = 1e-12  # relative to trace(H): keeps the solve defined along an exactly degenerate direction
-COARSE_CONVERGENCE = 10.0  # the subset's steps end once one moves less than this x the convergence threshold
+COARSE_CONVERGENCE = 100.0  # the subset's steps end once one moves less than this x the convergence threshold (1 cm)
 
 
 @dataclass

@@ -27,6 +27,7 @@ from cemnet_ros.pipeline.steps.polish import Polisher, map_sample
 from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
 
 PREDICTION_SPREADS = 3.0  # an answer further than this many tracking spreads is not explained by the prediction
+CREDIBLE_WINDOW = 10  # recent prediction errors that decide whether the prediction is polished first
 
 
 class Tracker:
@@ -80,10 +81,15 @@ class Tracker:
         return [why] if why else []
 
     def _prediction_credible(self, polisher: Polisher, dt_ratio: float) -> bool:
-        """The prediction's expected error (:meth:`~.adaptive.AdaptiveSpread.expected_error`: translation + RMS
-        range x rotation) lies within the fine polish's reach: worth polishing on its own first."""
-        rotation, translation = self.spread.expected_error(dt_ratio)
-        return translation + polisher.frame.length * rotation <= polisher.reach
+        """The prediction is worth polishing on its own first: over the last ``CREDIBLE_WINDOW`` good steps its
+        typical (median) error, translation + RMS range x rotation stretched by ``dt_ratio``, lay within the fine
+        polish's reach (a handheld sensor's constant-velocity prediction is usually 10-30 deg off; a car's, or a
+        sensor reversing now and then, usually within it). None recorded yet: not credible."""
+        errors = self.spread.recent_errors(CREDIBLE_WINDOW)
+        if not len(errors):
+            return False
+        typical = np.median(errors[:, 1] + polisher.frame.length * errors[:, 0]) * max(1.0, dt_ratio)
+        return bool(typical <= polisher.reach)
 
     def _cem(self, frame: Frame, target: np.ndarray, T_predicted: np.ndarray, T_last: Optional[np.ndarray],
              dt_ratio: float) -> tuple[np.ndarray, float]:
