@@ -15,6 +15,7 @@ docs/node.md.
 """
 from __future__ import annotations
 
+import signal
 import sys
 import threading
 from typing import Any, Optional
@@ -254,12 +255,20 @@ def main(args: Optional[list] = None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        _ignore_interrupts()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     if error:
         print(f"align_node: error: {error}", file=sys.stderr)
         sys.exit(2)
+
+
+def _ignore_interrupts() -> None:
+    """The first Ctrl-C ends the node; more of them (a terminal and ``ros2 launch`` both send one) must not cut
+    its teardown short with a KeyboardInterrupt traceback and a killed-by-signal exit status."""
+    rclpy.signals.uninstall_signal_handlers()  # rclpy's handler hands each SIGINT on to Python's (KeyboardInterrupt)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 if __name__ == "__main__":
