@@ -21,6 +21,7 @@ import threading
 from typing import Any, Optional
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -74,7 +75,8 @@ class AlignNode(Node):
         threading.Thread(target=self._load, name="cemnet_load", daemon=True).start()
         self._subscribe(cfg)
         self._service_handlers = NodeServices(self, self._session, cfg.odom_frame, self._warn)
-        self.create_timer(1.0, self._publish_diagnostics)
+        # On the steady clock: ROS time stands still with use_sim_time until /clock arrives, and so would they.
+        self.create_timer(1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if cfg.local_map_period > 0:
             self.create_timer(cfg.local_map_period, self._publish_local_map)
         self.get_logger().info(f"align_node subscribed ({cfg.mode} mode); loading the engine")
@@ -225,8 +227,12 @@ class AlignNode(Node):
                 self._outputs.local_map(points)
 
     def _publish_diagnostics(self) -> None:
+        clock_unset = self.get_clock().ros_time_is_active and self._now_ns() == 0
         self._outputs.diagnostics(self._status.report(self._worker.stats(), self._session.scale,
-                                                      self.count_publishers(self._input_topic)))
+                                                      self.count_publishers(self._input_topic), clock_unset))
+        missing_clock = self._status.missing_clock(clock_unset)
+        if missing_clock is not None:
+            self._warn("clock", missing_clock)
 
     def destroy_node(self) -> None:
         self._session.close()  # a worker waiting for the engine gives up
