@@ -31,6 +31,7 @@ from sensor_msgs.msg import PointCloud2
 
 from cemnet_ros.pipeline.node.aligner_session import AlignerSession, StepResult
 from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy, transform_msg_to_matrix
+from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
 from cemnet_ros.pipeline.node.node_status import NodeStatus
 from cemnet_ros.pipeline.node.pairing import PairMatcher
 from cemnet_ros.pipeline.node.scan_status import Outcome, ScanStatus
@@ -61,15 +62,16 @@ class AlignNode(Node):
         self._cfg = cfg
         self.get_logger().info("parameters in force: " + ", ".join(
             f"{k}={v}" for k, v in {**config_values(cfg), **config_values(pipeline_config)}.items()))
-        self._session = AlignerSession(pipeline_config, cfg, BaseFrame(pose_from_xyz_rpy(cfg.base_to_sensor)))
-        self._extrinsic_from_tf = tf2_ros is not None
+        self._extrinsic = ExtrinsicHold(pose_from_xyz_rpy(cfg.base_to_sensor))
+        self._session = AlignerSession(pipeline_config, cfg, BaseFrame(self._extrinsic.T_base_sensor))
         self._status = NodeStatus(cfg.input_timeout)
         self._scan_status = ScanStatus(self._status)
         self._target: Optional[tuple[Incoming, Scan]] = None  # pair mode: the last target, decoded once
         self._outputs = NodeOutputs(self, cfg)
-        if self._extrinsic_from_tf:
-            self._tf_buffer = tf2_ros.Buffer()
-            self._tf_listener = tf2_ros.TransformListener(self._tf_buffer, self)
+        self.tf_buffer: Any = None  # a tf2_ros.Buffer where tf2_ros exists (a test may set a stand-in)
+        if tf2_ros is not None:
+            self.tf_buffer = tf2_ros.Buffer()
+            self._tf_listener = tf2_ros.TransformListener(self.tf_buffer, self)
         self._worker = BoundedWorker(self._process, maxsize=cfg.queue_size, on_error=self._on_worker_error,
                                      name="cemnet_align")
         threading.Thread(target=self._load, name="cemnet_load", daemon=True).start()
@@ -150,6 +152,7 @@ class AlignNode(Node):
             return
         self._report(self._scan_status.step(result.step))
         self._outputs.step(result, source, frame)
+        self._extrinsic.output_published()
 
     def _decode(self, item: Incoming) -> Scan:
         scan = decode(item, self._session.config.preprocess.deskew,
@@ -188,17 +191,25 @@ class AlignNode(Node):
                                 else ""))
 
     def _sensor_extrinsic(self, sensor_frame: str) -> None:
-        """T_base_sensor from TF once (when tf2_ros exists), else the base_to_sensor parameter stays."""
-        if not self._extrinsic_from_tf or not sensor_frame or sensor_frame == self._cfg.base_frame:
+        """T_base_sensor from TF until it answers once (where tf2_ros exists), else base_to_sensor; held fixed
+        from the first output on (pipeline/node/extrinsic_hold.py)."""
+        hold = self._extrinsic
+        if self.tf_buffer is None or hold.settled or not sensor_frame or sensor_frame == self._cfg.base_frame:
             return
+        frames = f"{self._cfg.base_frame} <- {sensor_frame}"
         try:
-            tf = self._tf_buffer.lookup_transform(self._cfg.base_frame, sensor_frame, rclpy.time.Time())
+            tf = self.tf_buffer.lookup_transform(self._cfg.base_frame, sensor_frame, rclpy.time.Time())
         except Exception as exc:  # noqa: BLE001 - tf2 raises several lookup errors
-            self._warn("extrinsic", f"no TF {self._cfg.base_frame} <- {sensor_frame} ({exc}); using base_to_sensor")
+            self._warn("extrinsic", f"no TF {frames} ({exc}); using base_to_sensor")
             return
-        self._session.base = BaseFrame(transform_msg_to_matrix(tf.transform))
-        self._extrinsic_from_tf = False
-        self.get_logger().info(f"extrinsic {self._cfg.base_frame} <- {sensor_frame} from TF")
+        adopted, line = hold.offer(transform_msg_to_matrix(tf.transform), frames)
+        if adopted:
+            self._session.base = BaseFrame(hold.T_base_sensor)
+        if hold.ignored is None:
+            self.get_logger().info(line)
+        else:
+            self.get_logger().warn(line)
+            self._status.stand("extrinsic", line)
 
     def _on_worker_error(self, item: Any, exc: BaseException) -> None:
         """A scan whose processing raised: counted, logged, and an ERROR verdict (no scan goes unreported)."""

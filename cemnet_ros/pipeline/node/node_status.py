@@ -5,7 +5,8 @@ WARN, for 3x that an ERROR (Autoware's "no input source" check); when publishers
 but not one message has ever arrived, the message says so (the transport drops the clouds: the shipped DDS
 profile fixes that, docs/node.md). New rejected inputs, drops, errors or flagged steps since the last report are
 a WARN, and so are scans arriving for ``CLOCK_GRACE_S`` while the node's ROS time stays unset (use_sim_time
-without /clock: every scan's stamp is then ahead of a clock that reads 0).
+without /clock: every scan's stamp is then ahead of a clock that reads 0) and a standing warning (a condition that
+lasts until the node restarts, e.g. an extrinsic ignored: ``warning_<kind>`` in the values).
 """
 from __future__ import annotations
 
@@ -63,6 +64,7 @@ class NodeStatus:
         self.recoveries = 0
         self.ready = False  # the engine has loaded
         self.last_step: Any = None
+        self.standing: dict[str, str] = {}  # kind -> a warning that holds until the node restarts
         self._previous = (0, 0, 0, 0)  # rejected, drops, errors, flagged at the previous report
 
     def input_arrived(self) -> None:
@@ -101,6 +103,11 @@ class NodeStatus:
         with self._lock:
             return None if not self._arrivals.times else self._clock() - self._arrivals.times[-1]
 
+    def stand(self, kind: str, message: str) -> None:
+        """A warning every later report repeats (WARN, ``warning_<kind>`` in the values)."""
+        with self._lock:
+            self.standing[kind] = message
+
     def missing_clock(self, clock_unset: bool) -> Optional[str]:
         """Why the scans cannot be used while ``clock_unset`` (use_sim_time and no /clock yet), once they have
         arrived for CLOCK_GRACE_S; None otherwise."""
@@ -121,6 +128,7 @@ class NodeStatus:
             now = self._clock()
             rejected, flagged, step, recoveries = dict(self.rejected), self.flagged, self.last_step, self.recoveries
             warned, published, received = dict(self.warned), self.published, self.received
+            standing = dict(self.standing)
             last = self._arrivals.times[-1] if self._arrivals.times else None
             span = min(RATE_WINDOW_S, now - self._started)
             rate, decoded_rate = self._arrivals.per_second(now, span), self._decoded.per_second(now, span)
@@ -128,8 +136,8 @@ class NodeStatus:
             previous, self._previous = self._previous, counts
         age = now - (last if last is not None else self._started)
         level, message = self._level(counts, previous, age, publishers if received == 0 else 0)
-        if missing_clock is not None:
-            level, message = max(level, WARN), missing_clock + ("" if message == "ok" else f"; {message}")
+        for warning in ([missing_clock] if missing_clock else []) + list(standing.values()):
+            level, message = max(level, WARN), warning + ("" if message == "ok" else f"; {message}")
         values = {
             "input_age_s": "" if last is None else round(age, 3), "input_rate_hz": round(rate, 2),
             "decoded_rate_hz": round(decoded_rate, 2), "input_publishers": publishers, "received": received,
@@ -147,6 +155,7 @@ class NodeStatus:
             values["last_" + name] = round(value, 4) if isinstance(value, float) else value
         values.update({f"rejected_{kind}": count for kind, count in sorted(rejected.items())})
         values.update({f"warned_{kind}": count for kind, count in sorted(warned.items())})
+        values.update({f"warning_{kind}": text for kind, text in sorted(standing.items())})
         return Report(level, message, values)
 
     def _level(self, counts: tuple, previous: tuple, age: float, silent_publishers: int) -> tuple[int, str]:
