@@ -47,7 +47,7 @@ def _expected(k, T_base_sensor):
 
 def test_a_tf_extrinsic_after_the_first_output_is_ignored_and_odom_does_not_jump(harness_factory):
     harness = harness_factory()
-    harness.node.tf_buffer = buffer = StandInBuffer()
+    harness.node.alignment.tf_buffer = buffer = StandInBuffer()
     outputs = [harness.send(scan_msg(0), timeout=FIRST_TIMEOUT)]
     buffer.transform = _transform(EXTRINSIC)  # TF comes up after the first pose went out
     outputs += [harness.send(scan_msg(k), timeout=FIRST_TIMEOUT) for k in range(1, 4)]
@@ -62,7 +62,7 @@ def test_a_tf_extrinsic_after_the_first_output_is_ignored_and_odom_does_not_jump
 
 def test_a_tf_extrinsic_there_from_the_start_is_used(harness_factory):
     harness = harness_factory()
-    harness.node.tf_buffer = buffer = StandInBuffer()
+    harness.node.alignment.tf_buffer = buffer = StandInBuffer()
     buffer.transform = _transform(EXTRINSIC)
     outputs = [harness.send(scan_msg(k), timeout=FIRST_TIMEOUT) for k in range(3)]
     T_base_sensor = pose_from_xyz_rpy(EXTRINSIC)
