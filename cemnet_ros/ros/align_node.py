@@ -11,14 +11,9 @@ docs/node.md.
 """
 from __future__ import annotations
 
-import signal
-import sys
 import threading
 from typing import Any, Optional
 
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from cemnet_ros.pipeline.node.aligner_session import AlignerSession
@@ -26,7 +21,8 @@ from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
 from cemnet_ros.ros.alignment import Alignment
 from cemnet_ros.ros.node_config import NodeConfig
-from cemnet_ros.ros.parameters import ConfigError, declare_and_read
+from cemnet_ros.ros.parameters import declare_and_read
+from cemnet_ros.ros.process import run
 from cemnet_ros.schema import values as config_values
 
 
@@ -78,34 +74,7 @@ def log_parameters(node: Node, cfg: NodeConfig, pipeline_config: Any) -> None:
 
 def main(args: Optional[list] = None) -> None:
     """Spin until SIGINT; a fatal configuration or engine error is one line on stderr and exit status 2."""
-    rclpy.init(args=args)
-    node, error = None, None
-    try:
-        node = AlignNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while rclpy.ok() and node.fatal_error is None:
-            executor.spin_once(timeout_sec=0.25)
-        error = node.fatal_error
-    except (ConfigError, ParameterException) as exc:
-        error = str(exc).splitlines()[0]
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        _ignore_interrupts()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if error:
-        print(f"align_node: error: {error}", file=sys.stderr)
-        sys.exit(2)
-
-
-def _ignore_interrupts() -> None:
-    """The first Ctrl-C ends the node; more of them (a terminal and ``ros2 launch`` both send one) must not cut
-    its teardown short with a KeyboardInterrupt traceback and a killed-by-signal exit status."""
-    rclpy.signals.uninstall_signal_handlers()  # rclpy's handler hands each SIGINT on to Python's (KeyboardInterrupt)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    run(AlignNode, "align_node", args)
 
 
 if __name__ == "__main__":
