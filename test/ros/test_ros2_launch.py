@@ -2,13 +2,35 @@
 skips without the launch system and ros2 CLI (./run installs them from ../shared/ros2)."""
 from __future__ import annotations
 
+import os
+import random
+import signal
 import subprocess
+import threading
+import time
+from pathlib import Path
 
+import numpy as np
 import pytest
-from install_layout import make_install_prefix, ros2_cli_missing, ros_environment
+import yaml
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
+
+import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from install_layout import make_install_prefix, ros2_cli_missing, ros_environment  # noqa: E402
+from nav_msgs.msg import Odometry  # noqa: E402
+from node_harness import FIRST_TIMEOUT, pose_of, read_bag, wait_for  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from sensor_msgs.msg import PointCloud2  # noqa: E402
+
+from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
+from cemnet_ros.ros.node_config import node_parameters  # noqa: E402
 
 pytestmark = [pytest.mark.dds, pytest.mark.skipif(bool(ros2_cli_missing()), reason=ros2_cli_missing() or "-")]
 LAUNCH = ["ros2", "launch", "cemnet_ros", "align_node.launch.py"]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -30,3 +52,142 @@ def test_a_missing_dds_profile_fails_clearly_before_starting_the_node(install_pr
                          env=ros_environment(install_prefix, 212), capture_output=True, text=True, timeout=60)
     output = run.stdout + run.stderr
     assert run.returncode != 0 and "no such file" in output and "process started" not in output, output
+
+
+def _domain_id() -> int:
+    return random.Random(os.getpid() ^ time.time_ns()).randint(120, 200)
+
+
+class Output:
+    """A process's output lines, read by a thread (a pipe read in the test's thread can block or hide lines)."""
+
+    def __init__(self, process: subprocess.Popen) -> None:
+        self.lines: list = []
+        self._thread = threading.Thread(target=self._read, args=(process,), daemon=True)
+        self._thread.start()
+
+    def _read(self, process: subprocess.Popen) -> None:
+        assert process.stdout is not None
+        for line in process.stdout:
+            self.lines.append(line)
+
+    def wait_for(self, needle: str, timeout: float) -> bool:
+        """Whether a line with ``needle`` came within ``timeout`` (False at once when the output has ended)."""
+        wait_for(lambda: any(needle in line for line in self.lines) or not self._thread.is_alive(), timeout)
+        return any(needle in line for line in self.lines)
+
+    def text(self, timeout: float = 0.0) -> str:
+        """All lines so far (``timeout``: wait for the end of the output first)."""
+        self._thread.join(timeout)
+        return "".join(self.lines)
+
+
+@pytest.mark.slow
+def test_the_default_launch_runs_headless_aligns_the_kitti_scans_dumps_its_parameters_and_stops_on_ctrl_c(
+        install_prefix, context, tmp_path, monkeypatch):
+    """The user's day: ``ros2 launch`` with the defaults (no RViz2 here), a driver's scans, the odometry against
+    the ground truth, ``ros2 param dump`` loaded by a new node, Ctrl-C."""
+    kitti = REPO / "bags" / "kitti_00_6scans.mcap"
+    if not kitti.is_file():
+        pytest.skip("bags/kitti_00_6scans.mcap missing")
+    clouds, truth = read_bag(kitti)
+    domain = _domain_id()
+    env = ros_environment(install_prefix, domain)
+    monkeypatch.setenv("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_large_data.xml"))
+    launch = subprocess.Popen(LAUNCH, env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              start_new_session=True)  # its own process group: a failed test kills it whole
+    output, driver = Output(launch), None
+    try:
+        driver = Driver(domain)
+        assert output.wait_for("engine ready", FIRST_TIMEOUT), output.text()
+        assert "rviz" not in output.text().lower(), output.text()
+        estimates = [pose_of(driver.send(raw)) for _, raw in clouds]
+        dump = subprocess.run(["ros2", "param", "dump", "--no-daemon", "/align_node"], env=env, capture_output=True,
+                              text=True, timeout=60)
+        assert dump.returncode == 0, dump.stderr
+        launch.send_signal(signal.SIGINT)
+        launch.wait(timeout=60)
+    finally:
+        if driver is not None:
+            driver.close()
+        _kill_group(launch)
+    log = output.text(timeout=10.0)
+    gt = [np.linalg.inv(truth[clouds[0][0]]) @ truth[ns] for ns, _ in clouds]
+    for k in range(1, len(gt)):  # the per-pair floor of the KITTI bag (test_node_bags.py)
+        trans_err, rot_err = relative_error(np.linalg.inv(estimates[k - 1]) @ estimates[k],
+                                            np.linalg.inv(gt[k - 1]) @ gt[k])
+        assert trans_err <= 0.05 and rot_err <= 0.2, (k, trans_err, rot_err)
+    assert launch.returncode == 0 and "process has finished cleanly" in log, log
+    assert "Traceback" not in log and "XML" not in log, log
+    dumped = _flat(yaml.safe_load(dump.stdout)["/align_node"]["ros__parameters"])
+    params_file = tmp_path / "dumped.yaml"
+    params_file.write_text(dump.stdout)
+    node = AlignNode(context=context, cli_args=["--ros-args", "--params-file", str(params_file)])
+    try:
+        reloaded = {name: node.get_parameter(name).value for name in node_parameters()}
+    finally:
+        node.destroy_node()
+    assert {name: dumped[name] for name in reloaded} == {name: _plain(value) for name, value in reloaded.items()}
+
+
+def _kill_group(process: subprocess.Popen) -> None:
+    """Kill whatever of the process's group still runs (nothing, when the launch stopped its nodes)."""
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+def _flat(tree: dict, prefix: str = "") -> dict:
+    """``ros2 param dump`` nests dotted names ({"checks": {"max_points": ...}}): back to "checks.max_points"."""
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _plain(value):
+    """A parameter value as YAML loads it (arrays come back as lists)."""
+    return list(value) if isinstance(value, (tuple, np.ndarray)) or type(value).__name__ == "array" else value
+
+
+class Driver:
+    """The sensor driver's side: publishes raw PointCloud2 CDR on /points, collects /align_node/odometry."""
+
+    def __init__(self, domain_id: int):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node("kitti_driver", context=self.context)
+        self.points = self.node.create_publisher(PointCloud2, "/points", 10)
+        self.odometry: list = []
+        self.node.create_subscription(Odometry, "/align_node/odometry", self.odometry.append, 50)
+        self.publishers_seen = 0  # by the node, from its diagnostics: it has matched this publisher
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        # Best effort (the node's default QoS) drops what is sent before both sides have matched each other.
+        assert wait_for(lambda: self.points.get_subscription_count() > 0 and self.publishers_seen > 0, 30.0), \
+            "align_node never subscribed"
+
+    def _on_diagnostics(self, msg) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if status.name.startswith("/align_node") and values.get("input_publishers", "0").isdigit():
+                self.publishers_seen = max(self.publishers_seen, int(values["input_publishers"]))
+
+    def send(self, raw: bytes):
+        count = len(self.odometry)
+        self.points.publish(raw)
+        assert wait_for(lambda: len(self.odometry) > count, 120.0), "no odometry"
+        return self.odometry[-1]
+
+    def close(self):
+        self.executor.shutdown()
+        self.thread.join(10)
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
