@@ -49,6 +49,8 @@ class Alignment:
     def __init__(self, node: Node, cfg: NodeConfig, session: AlignerSession, extrinsic: ExtrinsicHold) -> None:
         self._node, self._cfg, self._session, self._extrinsic = node, cfg, session, extrinsic
         self.status = NodeStatus(cfg.input_timeout)
+        if extrinsic.ignored is not None:  # a lifecycle node's reactivation: the outputs still use the old one
+            self.status.stand("extrinsic", extrinsic.ignored)
         self._scan_status = ScanStatus(self.status)
         self._target: Optional[tuple[Incoming, Scan]] = None  # pair mode: the last target, decoded once
         self._outputs = NodeOutputs(node, cfg)

@@ -12,10 +12,11 @@ import pytest
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
 
 import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
-from node_harness import FAST, FIRST_TIMEOUT, POSES, pose_of, scan_msg, wait_for  # noqa: E402
+from node_harness import EXTRINSIC, FAST, FIRST_TIMEOUT, POSES, StandInBuffer, pose_of, scan_msg, transform, wait_for  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
@@ -37,8 +38,10 @@ class Managed:
         self.change = self.probe.create_client(ChangeState, f"{ns}/change_state")
         self.get = self.probe.create_client(GetState, f"{ns}/get_state")
         self.points = self.probe.create_publisher(PointCloud2, f"/{namespace}/points", 10)
-        self.odometry = []
+        self.odometry, self.diagnostics = [], []
         self.probe.create_subscription(Odometry, f"{ns}/odometry", self.odometry.append, 50)
+        self.probe.create_subscription(DiagnosticArray, "/diagnostics", lambda msg: self.diagnostics.extend(
+            status for status in msg.status if status.name == f"{ns}: alignment"), 50)
         self.executor = MultiThreadedExecutor(num_threads=2, context=context)
         self.executor.add_node(self.node)
         self.executor.add_node(self.probe)
@@ -115,3 +118,18 @@ def test_a_configure_that_cannot_load_fails_and_stays_unconfigured(managed_facto
     managed = managed_factory({"tracking.prior": "network", "registration.weights": "/nonexistent/w.npz"})
     assert not managed.transition(Transition.TRANSITION_CONFIGURE)
     assert managed.state() == "unconfigured" and not managed.subscribed()
+
+
+def test_an_ignored_extrinsic_is_still_reported_after_a_reactivation(managed_factory):
+    managed = managed_factory()
+    assert managed.transition(Transition.TRANSITION_CONFIGURE) and managed.transition(Transition.TRANSITION_ACTIVATE)
+    managed.node._alignment.tf_buffer = buffer = StandInBuffer()
+    assert wait_for(managed.subscribed, 10.0)
+    _send(managed, 0)
+    buffer.transform = transform(EXTRINSIC)  # after the first output: ignored
+    _send(managed, 1)
+    assert managed.transition(Transition.TRANSITION_DEACTIVATE) and managed.transition(Transition.TRANSITION_ACTIVATE)
+    count = len(managed.diagnostics)
+    assert wait_for(lambda: len(managed.diagnostics) > count, 5.0)
+    values = {kv.key: kv.value for kv in managed.diagnostics[-1].values}
+    assert "arrived after the first output" in values.get("warning_extrinsic", ""), values

@@ -9,36 +9,12 @@ import pytest
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
 
-from geometry_msgs.msg import Quaternion, TransformStamped, Vector3  # noqa: E402
-from node_harness import FIRST_TIMEOUT, POSES, pose_of, scan_msg, wait_for  # noqa: E402
-from scipy.spatial.transform import Rotation  # noqa: E402
+from node_harness import EXTRINSIC, FIRST_TIMEOUT, POSES, StandInBuffer, pose_of, scan_msg, transform, wait_for  # noqa: E402
 
 from cemnet_ros.bench.metrics import relative_error  # noqa: E402
 from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy  # noqa: E402
 
 pytestmark = pytest.mark.dds
-EXTRINSIC = (0.3, -0.1, 1.7, 0.01, -0.02, 0.5)
-
-
-class StandInBuffer:
-    """tf2_ros.Buffer's lookup_transform: raises until :attr:`transform` is set (TF not up yet)."""
-
-    def __init__(self):
-        self.transform = None
-
-    def lookup_transform(self, target, source, _time):
-        if self.transform is None:
-            raise LookupError(f"{target} <- {source}: no transform yet")
-        return self.transform
-
-
-def _transform(xyz_rpy):
-    T = pose_from_xyz_rpy(xyz_rpy)
-    msg = TransformStamped()
-    msg.transform.translation = Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3])
-    x, y, z, w = Rotation.from_matrix(T[:3, :3]).as_quat()
-    msg.transform.rotation = Quaternion(x=x, y=y, z=z, w=w)
-    return msg
 
 
 def _expected(k, T_base_sensor):
@@ -49,7 +25,7 @@ def test_a_tf_extrinsic_after_the_first_output_is_ignored_and_odom_does_not_jump
     harness = harness_factory()
     harness.node.alignment.tf_buffer = buffer = StandInBuffer()
     outputs = [harness.send(scan_msg(0), timeout=FIRST_TIMEOUT)]
-    buffer.transform = _transform(EXTRINSIC)  # TF comes up after the first pose went out
+    buffer.transform = transform(EXTRINSIC)  # TF comes up after the first pose went out
     outputs += [harness.send(scan_msg(k), timeout=FIRST_TIMEOUT) for k in range(1, 4)]
     for k, odom in enumerate(outputs):  # base_to_sensor (the sensor is the base) throughout
         trans_err, rot_err = relative_error(pose_of(odom), _expected(k, np.eye(4)))
@@ -63,7 +39,7 @@ def test_a_tf_extrinsic_after_the_first_output_is_ignored_and_odom_does_not_jump
 def test_a_tf_extrinsic_there_from_the_start_is_used(harness_factory):
     harness = harness_factory()
     harness.node.alignment.tf_buffer = buffer = StandInBuffer()
-    buffer.transform = _transform(EXTRINSIC)
+    buffer.transform = transform(EXTRINSIC)
     outputs = [harness.send(scan_msg(k), timeout=FIRST_TIMEOUT) for k in range(3)]
     T_base_sensor = pose_from_xyz_rpy(EXTRINSIC)
     for k, odom in enumerate(outputs):
