@@ -19,6 +19,8 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from install_layout import make_install_prefix, ros2_cli_missing, ros_environment  # noqa: E402
+from lifecycle_msgs.msg import Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from node_harness import FIRST_TIMEOUT, pose_of, read_bag, wait_for  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
@@ -76,6 +78,42 @@ def test_the_node_gets_the_dds_profile_or_none_at_all(install_prefix, argument, 
     assert launch.returncode == 0 and "XML" not in output.text(timeout=10.0), output.text()
 
 
+def test_ros2_run_starts_the_lifecycle_node_unconfigured_and_configure_loads_it(install_prefix):
+    domain = _domain_id()
+    node = subprocess.Popen(["ros2", "run", "cemnet_ros", "align_lifecycle_node"], env=ros_environment(
+        install_prefix, domain), text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    output = Output(node)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    client_node = rclpy.create_node("lifecycle_client", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(client_node)
+    try:
+        get = client_node.create_client(GetState, "/align_node/get_state")
+        change = client_node.create_client(ChangeState, "/align_node/change_state")
+        assert get.wait_for_service(60.0) and change.wait_for_service(10.0), output.text()
+
+        def call(client, request):
+            future = client.call_async(request)
+            executor.spin_until_future_complete(future, timeout_sec=FIRST_TIMEOUT)
+            assert future.done(), output.text()
+            return future.result()
+
+        assert call(get, GetState.Request()).current_state.label == "unconfigured"
+        configure = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE))
+        assert call(change, configure).success, output.text()
+        assert call(get, GetState.Request()).current_state.label == "inactive"
+        os.killpg(node.pid, signal.SIGINT)  # Ctrl-C in a terminal: ros2 run and the node both get one
+        node.wait(timeout=60)
+    finally:
+        executor.shutdown()
+        client_node.destroy_node()
+        rclpy.shutdown(context=context)
+        _kill_group(node)
+    assert node.returncode == 0 and "configured: engine ready" in output.text(timeout=10.0), output.text()
+    assert "Traceback" not in output.text(), output.text()
+
+
 def _domain_id() -> int:
     return random.Random(os.getpid() ^ time.time_ns()).randint(120, 200)
 
@@ -125,7 +163,7 @@ def test_the_default_launch_runs_headless_aligns_the_kitti_scans_dumps_its_param
         assert "rviz" not in output.text().lower(), output.text()
         estimates = [pose_of(driver.send(raw)) for _, raw in clouds]
         dump = _param_dump(env)
-        launch.send_signal(signal.SIGINT)
+        os.killpg(launch.pid, signal.SIGINT)  # Ctrl-C in a terminal: the node gets it from there and from launch
         launch.wait(timeout=60)
     finally:
         if driver is not None:
