@@ -3,11 +3,8 @@ skips without the launch system and ros2 CLI (./run installs them from ../shared
 from __future__ import annotations
 
 import os
-import random
-import signal
 import subprocess
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +21,7 @@ from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from node_harness import FIRST_TIMEOUT, pose_of, read_bag, wait_for  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from ros_cli import domain_id, interrupt, kill_group, param_dump, start  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
 from cemnet_ros.bench.metrics import relative_error  # noqa: E402
@@ -59,30 +57,25 @@ def test_a_missing_dds_profile_fails_clearly_before_starting_the_node(install_pr
 @pytest.mark.parametrize("argument, expected", [
     ([], "share/cemnet_ros/config/fastdds_large_data.xml"), (["dds_profile:=none"], None)])
 def test_the_node_gets_the_dds_profile_or_none_at_all(install_prefix, argument, expected):
-    env = ros_environment(install_prefix, _domain_id())
+    env = ros_environment(install_prefix, domain_id())
     env.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
-    launch = subprocess.Popen([*LAUNCH, *argument], env=env, text=True, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, start_new_session=True)
-    output = Output(launch)
+    launch, output = start([*LAUNCH, *argument], env)
     try:
         assert output.wait_for("process started with pid", 60.0), output.text()
         pid = int(next(line for line in output.lines if "process started with pid" in line).split("[")[-1][:-2])
         environment = dict(entry.split("=", 1) for entry in
                            Path(f"/proc/{pid}/environ").read_text().split("\0") if "=" in entry)
-        launch.send_signal(signal.SIGINT)
-        launch.wait(timeout=60)
+        interrupt(launch)
     finally:
-        _kill_group(launch)
+        kill_group(launch)
     profile = environment.get("FASTRTPS_DEFAULT_PROFILES_FILE")
     assert profile is None if expected is None else profile.endswith(expected), profile
     assert launch.returncode == 0 and "XML" not in output.text(timeout=10.0), output.text()
 
 
 def test_ros2_run_starts_the_lifecycle_node_unconfigured_and_configure_loads_it(install_prefix):
-    domain = _domain_id()
-    node = subprocess.Popen(["ros2", "run", "cemnet_ros", "align_lifecycle_node"], env=ros_environment(
-        install_prefix, domain), text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
-    output = Output(node)
+    domain = domain_id()
+    node, output = start(["ros2", "run", "cemnet_ros", "align_lifecycle_node"], ros_environment(install_prefix, domain))
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     client_node = rclpy.create_node("lifecycle_client", context=context)
@@ -103,43 +96,14 @@ def test_ros2_run_starts_the_lifecycle_node_unconfigured_and_configure_loads_it(
         configure = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE))
         assert call(change, configure).success, output.text()
         assert call(get, GetState.Request()).current_state.label == "inactive"
-        os.killpg(node.pid, signal.SIGINT)  # Ctrl-C in a terminal: ros2 run and the node both get one
-        node.wait(timeout=60)
+        interrupt(node)
     finally:
         executor.shutdown()
         client_node.destroy_node()
         rclpy.shutdown(context=context)
-        _kill_group(node)
+        kill_group(node)
     assert node.returncode == 0 and "configured: engine ready" in output.text(timeout=10.0), output.text()
     assert "Traceback" not in output.text(), output.text()
-
-
-def _domain_id() -> int:
-    return random.Random(os.getpid() ^ time.time_ns()).randint(120, 200)
-
-
-class Output:
-    """A process's output lines, read by a thread (a pipe read in the test's thread can block or hide lines)."""
-
-    def __init__(self, process: subprocess.Popen) -> None:
-        self.lines: list = []
-        self._thread = threading.Thread(target=self._read, args=(process,), daemon=True)
-        self._thread.start()
-
-    def _read(self, process: subprocess.Popen) -> None:
-        assert process.stdout is not None
-        for line in process.stdout:
-            self.lines.append(line)
-
-    def wait_for(self, needle: str, timeout: float) -> bool:
-        """Whether a line with ``needle`` came within ``timeout`` (False at once when the output has ended)."""
-        wait_for(lambda: any(needle in line for line in self.lines) or not self._thread.is_alive(), timeout)
-        return any(needle in line for line in self.lines)
-
-    def text(self, timeout: float = 0.0) -> str:
-        """All lines so far (``timeout``: wait for the end of the output first)."""
-        self._thread.join(timeout)
-        return "".join(self.lines)
 
 
 @pytest.mark.slow
@@ -151,24 +115,22 @@ def test_the_default_launch_runs_headless_aligns_the_kitti_scans_dumps_its_param
     if not kitti.is_file():
         pytest.skip("bags/kitti_00_6scans.mcap missing")
     clouds, truth = read_bag(kitti)
-    domain = _domain_id()
+    domain = domain_id()
     env = ros_environment(install_prefix, domain)
     monkeypatch.setenv("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_large_data.xml"))
-    launch = subprocess.Popen(LAUNCH, env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                              start_new_session=True)  # its own process group: a failed test kills it whole
-    output, driver = Output(launch), None
+    launch, output = start(LAUNCH, env)
+    driver = None
     try:
         driver = Driver(domain)
         assert output.wait_for("engine ready", FIRST_TIMEOUT), output.text()
         assert "rviz" not in output.text().lower(), output.text()
         estimates = [pose_of(driver.send(raw)) for _, raw in clouds]
-        dump = _param_dump(env)
-        os.killpg(launch.pid, signal.SIGINT)  # Ctrl-C in a terminal: the node gets it from there and from launch
-        launch.wait(timeout=60)
+        dump = param_dump(env)
+        interrupt(launch)  # the node gets a SIGINT from the terminal and one from launch
     finally:
         if driver is not None:
             driver.close()
-        _kill_group(launch)
+        kill_group(launch)
     log = output.text(timeout=10.0)
     gt = [np.linalg.inv(truth[clouds[0][0]]) @ truth[ns] for ns, _ in clouds]
     for k in range(1, len(gt)):  # the per-pair floor of the KITTI bag (test_node_bags.py)
@@ -186,24 +148,6 @@ def test_the_default_launch_runs_headless_aligns_the_kitti_scans_dumps_its_param
     finally:
         node.destroy_node()
     assert {name: dumped[name] for name in reloaded} == {name: _plain(value) for name, value in reloaded.items()}
-
-
-def _param_dump(env: dict) -> subprocess.CompletedProcess:
-    """``ros2 param dump /align_node`` without a daemon (none is left behind); its discovery gets a few tries."""
-    for _ in range(3):
-        dump = subprocess.run(["ros2", "param", "dump", "--no-daemon", "--spin-time", "2", "/align_node"], env=env,
-                              capture_output=True, text=True, timeout=60)
-        if dump.returncode == 0:
-            return dump
-    pytest.fail(f"ros2 param dump failed: {dump.stderr}")
-
-
-def _kill_group(process: subprocess.Popen) -> None:
-    """Kill whatever of the process's group still runs (nothing, when the launch stopped its nodes)."""
-    try:
-        os.killpg(process.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
 
 
 def _flat(tree: dict, prefix: str = "") -> dict:
