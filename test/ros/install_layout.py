@@ -44,6 +44,18 @@ def make_install_prefix(prefix: Path) -> Path:
     return prefix
 
 
+def add_stand_in_executable(prefix: Path, package: str, executable: str, script: str) -> None:
+    """An ament package ``package`` in ``prefix`` whose ``lib/<package>/<executable>`` is the shell ``script``
+    (e.g. an rviz2 that only says it was started, where RViz2 is not installed)."""
+    marker = prefix / "share" / "ament_index" / "resource_index" / "packages" / package
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    marker.touch()
+    path = prefix / "lib" / package / executable
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("#!/bin/sh\n" + script + "\n")
+    path.chmod(0o755)
+
+
 def ros_environment(prefix: Path, domain_id: int) -> dict:
     """The environment of a shell that sourced the install: AMENT_PREFIX_PATH, the venv's bin first on PATH,
     a private DDS domain on this host."""

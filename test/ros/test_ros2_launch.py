@@ -15,7 +15,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from install_layout import make_install_prefix, ros2_cli_missing, ros_environment  # noqa: E402
+from install_layout import add_stand_in_executable, make_install_prefix, ros2_cli_missing, ros_environment  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -52,6 +52,21 @@ def test_a_missing_dds_profile_fails_clearly_before_starting_the_node(install_pr
                          env=ros_environment(install_prefix, 212), capture_output=True, text=True, timeout=60)
     output = run.stdout + run.stderr
     assert run.returncode != 0 and "no such file" in output and "process started" not in output, output
+
+
+def test_rviz_auto_starts_rviz2_where_it_is_installed(install_prefix, tmp_path):
+    stand_in = tmp_path / "rviz_install"
+    add_stand_in_executable(stand_in, "rviz2", "rviz2", 'echo "stand-in rviz2 $*"; exec sleep 120')
+    env = ros_environment(install_prefix, domain_id())
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(stand_in), env["AMENT_PREFIX_PATH"]])
+    launch, output = start(LAUNCH, env)
+    try:
+        assert output.wait_for("stand-in rviz2 -d", 60.0), output.text()
+        assert output.wait_for("align_node subscribed", 60.0), output.text()
+        interrupt(launch)
+    finally:
+        kill_group(launch)
+    assert "share/cemnet_ros/rviz/cemnet_ros.rviz" in output.text(timeout=10.0), output.text()
 
 
 @pytest.mark.parametrize("argument, expected", [
