@@ -7,17 +7,27 @@
 
 Every process started here (the node, RViz2, the bag player, and a driver included in this launch) uses the
 package's Fast DDS profile for large clouds (``dds_profile``; docs/node.md: Large clouds) unless the shell
-already names one in FASTRTPS_DEFAULT_PROFILES_FILE.
+already names one in FASTRTPS_DEFAULT_PROFILES_FILE; ``dds_profile:=none`` (or an empty value from an including
+launch file) unsets the variable: Fast DDS's defaults.
+
+RViz2 starts where it is installed (``rviz:=auto``); ``rviz:=true`` without it fails before any process starts.
 """
 import os
 
-from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, SetEnvironmentVariable
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix, get_package_share_directory
+from launch.actions import (
+    DeclareLaunchArgument,
+    ExecuteProcess,
+    OpaqueFunction,
+    SetEnvironmentVariable,
+    UnsetEnvironmentVariable,
+)
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration, NotEqualsSubstitution
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
+from cemnet_ros.launch_choices import dds_profile_file, rviz_wanted
 from launch import LaunchDescription
 
 
@@ -39,13 +49,14 @@ def generate_launch_description():
                               description="parent frame of the odometry and the TF (REP-105 odom)"),
         DeclareLaunchArgument("base_frame", default_value="base_link",
                               description="child frame of the odometry and the TF"),
-        DeclareLaunchArgument("rviz", default_value="true",
-                              description="start RViz2 with the package's view"),
+        DeclareLaunchArgument("rviz", default_value="auto",
+                              description="start RViz2 with the package's view: auto = where it is installed, "
+                                          "true = required (fails before starting anything without it), false"),
         DeclareLaunchArgument("dds_profile",
                               default_value=os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or
                               os.path.join(share, "config", "fastdds_large_data.xml"),
                               description="Fast DDS profile (shared memory large enough for full-size scans); "
-                                          "'' = Fast DDS's defaults"),
+                                          "none = Fast DDS's defaults"),
         DeclareLaunchArgument("bag", default_value="",
                               description="rosbag2 to replay with 'ros2 bag play <bag> --clock' ('' = none); "
                                           "also set use_sim_time:=true, and input_topic to the bag's cloud topic"),
@@ -75,7 +86,6 @@ def generate_launch_description():
         arguments=["-d", os.path.join(share, "rviz", "cemnet_ros.rviz")],
         parameters=[{"use_sim_time": use_sim_time}],  # the TF and the clouds carry the bag's stamps
         output="screen",
-        condition=IfCondition(LaunchConfiguration("rviz")),
     )
 
     bag_play = ExecuteProcess(
@@ -84,5 +94,23 @@ def generate_launch_description():
         condition=IfCondition(NotEqualsSubstitution(bag, "")),
     )
 
-    dds_profile = SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE", LaunchConfiguration("dds_profile"))
-    return LaunchDescription(arguments + [dds_profile, align_node, rviz, bag_play])
+    return LaunchDescription(arguments + [OpaqueFunction(function=_start, args=[rviz, bag_play, align_node])])
+
+
+def _start(context, rviz, bag_play, align_node):
+    """The DDS profile and the processes, once the arguments are checked (cemnet_ros/launch_choices.py): a bad
+    argument raises here, before any process starts. align_node comes last: an action that fails at start
+    (launch then exits without stopping what already runs) cannot leave it behind."""
+    profile = dds_profile_file(LaunchConfiguration("dds_profile").perform(context))
+    environment = UnsetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE") if profile is None \
+        else SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE", profile)
+    wanted = rviz_wanted(LaunchConfiguration("rviz").perform(context), _installed("rviz2"))
+    return [environment] + ([rviz] if wanted else []) + [bag_play, align_node]
+
+
+def _installed(package):
+    try:
+        get_package_prefix(package)
+    except PackageNotFoundError:
+        return False
+    return True

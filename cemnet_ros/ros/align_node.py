@@ -1,12 +1,8 @@
 """``align_node``: CEMNet point cloud alignment as a ROS 2 odometry node.
 
-The ROS layer converts, queues and publishes; what it decides is plain code in :mod:`cemnet_ros.pipeline`. The
-subscriptions take the messages' CDR bytes and only queue them (:mod:`.scans`, pair mode through
-:class:`~cemnet_ros.pipeline.node.pairing.PairMatcher`); a background thread loads the engine (so that the
-subscriptions exist at once and early scans wait in the queue); one worker thread deserializes and decodes,
-then registers through :class:`~cemnet_ros.pipeline.node.aligner_session.AlignerSession` and publishes
-(:mod:`.outputs`). Every input gets a verdict (:mod:`~cemnet_ros.pipeline.node.scan_status`); a full queue drops its
-oldest message before it is deserialized, counted and reported. Services: :mod:`.services`.
+The ROS layer converts, queues and publishes (:mod:`.alignment`); what it decides is plain code in
+:mod:`cemnet_ros.pipeline`. A background thread loads the engine, so that the subscriptions exist at once and early
+scans wait in the queue. ``align_lifecycle_node`` (:mod:`.align_lifecycle_node`) is the managed variant.
 
 Modes: ``sequential`` registers each ``input_topic`` scan against a local map (odometry of ``base_frame`` in
 ``odom_frame``); ``pair`` aligns each ``source_topic`` scan to the ``target_topic`` cloud nearest in stamp (or
@@ -15,35 +11,19 @@ docs/node.md.
 """
 from __future__ import annotations
 
-import sys
 import threading
 from typing import Any, Optional
 
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import PointCloud2
 
-from cemnet_ros.pipeline.errors import ScanRejected
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession, StepResult
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy, transform_msg_to_matrix
-from cemnet_ros.pipeline.node.node_status import NodeStatus
-from cemnet_ros.pipeline.node.pairing import PairMatcher
-from cemnet_ros.pipeline.node.scan_status import Outcome, ScanStatus
-from cemnet_ros.pipeline.node.worker import BoundedWorker
-from cemnet_ros.ros.outputs import NodeOutputs
-from cemnet_ros.ros.parameters import ConfigError, declare_and_read
-from cemnet_ros.ros.scans import Incoming, Scan, decode
-from cemnet_ros.ros.services import NodeServices
+from cemnet_ros.pipeline.node.aligner_session import AlignerSession
+from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
+from cemnet_ros.ros.alignment import Alignment
+from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.ros.parameters import declare_and_read
+from cemnet_ros.ros.process import run
 from cemnet_ros.schema import values as config_values
-
-try:  # a full ROS install only: the sensor's extrinsic from TF
-    import tf2_ros
-except ImportError:  # pragma: no cover
-    tf2_ros = None
 
 
 class AlignNode(Node):
@@ -56,26 +36,10 @@ class AlignNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("align_node", **kwargs)
         cfg, pipeline_config = declare_and_read(self)
-        self._cfg = cfg
-        self.get_logger().info("parameters in force: " + ", ".join(
-            f"{k}={v}" for k, v in {**config_values(cfg), **config_values(pipeline_config)}.items()))
-        self._session = AlignerSession(pipeline_config, cfg, BaseFrame(pose_from_xyz_rpy(cfg.base_to_sensor)))
-        self._extrinsic_from_tf = tf2_ros is not None
-        self._status = NodeStatus(cfg.input_timeout)
-        self._scan_status = ScanStatus(self._status)
-        self._target: Optional[tuple[Incoming, Scan]] = None  # pair mode: the last target, decoded once
-        self._outputs = NodeOutputs(self, cfg)
-        if self._extrinsic_from_tf:
-            self._tf_buffer = tf2_ros.Buffer()
-            self._tf_listener = tf2_ros.TransformListener(self._tf_buffer, self)
-        self._worker = BoundedWorker(self._process, maxsize=cfg.queue_size, on_error=self._on_worker_error,
-                                     name="cemnet_align")
+        log_parameters(self, cfg, pipeline_config)
+        self._session, extrinsic = new_session(cfg, pipeline_config)
+        self.alignment = Alignment(self, cfg, self._session, extrinsic)
         threading.Thread(target=self._load, name="cemnet_load", daemon=True).start()
-        self._subscribe(cfg)
-        self._service_handlers = NodeServices(self, self._session, cfg.odom_frame, self._warn)
-        self.create_timer(1.0, self._publish_diagnostics)
-        if cfg.local_map_period > 0:
-            self.create_timer(cfg.local_map_period, self._publish_local_map)
         self.get_logger().info(f"align_node subscribed ({cfg.mode} mode); loading the engine")
 
     @property
@@ -83,184 +47,34 @@ class AlignNode(Node):
         """Why the engine did not load (None: it loaded or is loading)."""
         return self._session.fatal_error
 
-    def _subscribe(self, cfg: Any) -> None:
-        reliability = ReliabilityPolicy.BEST_EFFORT if cfg.qos_reliability == "best_effort" \
-            else ReliabilityPolicy.RELIABLE
-        input_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=cfg.qos_depth, reliability=reliability,
-                               durability=DurabilityPolicy.VOLATILE)
-        if cfg.mode == "sequential":
-            self._input_topic = cfg.input_topic
-            self.create_subscription(PointCloud2, cfg.input_topic, self._on_scan, input_qos, raw=True)
-            return
-        target_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=cfg.qos_depth,
-                                reliability=ReliabilityPolicy.RELIABLE,
-                                durability=DurabilityPolicy.TRANSIENT_LOCAL) if cfg.target_transient_local \
-            else input_qos
-        self._pairs: PairMatcher = PairMatcher(int(cfg.pair_tolerance * 1e9), cfg.qos_depth, cfg.qos_depth)
-        self._input_topic = cfg.source_topic
-        self.create_subscription(PointCloud2, cfg.source_topic, self._on_source, input_qos, raw=True)
-        self.create_subscription(PointCloud2, cfg.target_topic, self._on_target, target_qos, raw=True)
-
-    # -- inputs (executor thread: CDR bytes + stamp, enqueue; no deserializing) ------------------------------
-    def _incoming(self, payload: bytes, topic_kind: str) -> Optional[Incoming]:
-        self._status.input_arrived()
-        try:
-            return Incoming.of(payload, topic_kind)
-        except ScanRejected as exc:
-            self._report(self._scan_status.rejected(exc.kind, f"{topic_kind} cloud rejected: {exc}", None))
-            return None
-
-    def _on_scan(self, payload: bytes) -> None:
-        item = self._incoming(payload, "input")
-        if item is not None:
-            self._submit(item)
-
-    def _on_target(self, payload: bytes) -> None:
-        item = self._incoming(payload, "target")
-        if item is not None:
-            self._queue_pairs(*self._pairs.add_target(item))
-
-    def _on_source(self, payload: bytes) -> None:
-        item = self._incoming(payload, "source")
-        if item is not None:
-            self._queue_pairs(*self._pairs.add_source(item))
-
-    def _queue_pairs(self, ready: list, unpaired: list) -> None:
-        for source in unpaired:
-            self._report(self._scan_status.unpaired(source.stamp_ns, self._pairs.tolerance_ns))
-        for pair in ready:
-            self._submit(pair)
-
-    def _submit(self, item: Any) -> None:
-        if not self._worker.submit(item):
-            loading = "" if self._status.ready else " while the engine loads"
-            self._warn("drop", f"queue full{loading}: the oldest scan was dropped "
-                               f"({self._worker.stats().drops} so far; queue_size {self._cfg.queue_size})")
-
-    # -- worker thread ---------------------------------------------------------------------------------------
-    def _process(self, item: Any) -> None:
-        self._session.begin_scan()
-        try:
-            result, source, frame = self._sequential(item) if isinstance(item, Incoming) else self._pair(*item)
-        except ScanRejected as exc:
-            self._report(self._scan_status.rejected(exc.kind, str(exc), _stamp_of(item)))
-            return
-        self._report(self._scan_status.step(result.step))
-        self._outputs.step(result, source, frame)
-
-    def _decode(self, item: Incoming) -> Scan:
-        scan = decode(item, self._session.config.preprocess.deskew,
-                      lambda payload: deserialize_message(payload, PointCloud2))
-        self._status.decoded()
-        self._log_warnings(self._scan_status.admitted(scan.warnings))
-        return scan
-
-    def _sequential(self, item: Incoming) -> tuple[StepResult, Scan, str]:
-        scan = self._decode(item)
-        frame_id = scan.msg.header.frame_id
-        self._sensor_extrinsic(frame_id)
-        return (self._session.process(scan, frame_id, self._now_ns(), self._worker.stats().depth), scan,
-                self._cfg.odom_frame)
-
-    def _pair(self, source_item: Incoming, target_item: Incoming) -> tuple[StepResult, Scan, str]:
-        if self._target is None or self._target[0] is not target_item:  # a latched target is decoded once
-            self._target = (target_item, self._decode(target_item))
-        target, source = self._target[1], self._decode(source_item)
-        target_frame = target.msg.header.frame_id
-        result = self._session.align_pair(source, target, source.msg.header.frame_id, target_frame, self._now_ns())
-        return result, source, target_frame or self._cfg.odom_frame
-
-    def _now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds
-
     def _load(self) -> None:
         """Import torch, load the weights and compile the kernels (seconds, a thread): scans queue meanwhile."""
         seconds = self._session.load()
         if seconds is None:
             self.get_logger().error(self._session.fatal_error)
             return
-        self._status.ready = True
-        drops = self._worker.stats().drops
-        self.get_logger().info(f"engine ready after {seconds:.1f} s" +
-                               (f"; {drops} scans dropped meanwhile (queue_size {self._cfg.queue_size})" if drops
-                                else ""))
-
-    def _sensor_extrinsic(self, sensor_frame: str) -> None:
-        """T_base_sensor from TF once (when tf2_ros exists), else the base_to_sensor parameter stays."""
-        if not self._extrinsic_from_tf or not sensor_frame or sensor_frame == self._cfg.base_frame:
-            return
-        try:
-            tf = self._tf_buffer.lookup_transform(self._cfg.base_frame, sensor_frame, rclpy.time.Time())
-        except Exception as exc:  # noqa: BLE001 - tf2 raises several lookup errors
-            self._warn("extrinsic", f"no TF {self._cfg.base_frame} <- {sensor_frame} ({exc}); using base_to_sensor")
-            return
-        self._session.base = BaseFrame(transform_msg_to_matrix(tf.transform))
-        self._extrinsic_from_tf = False
-        self.get_logger().info(f"extrinsic {self._cfg.base_frame} <- {sensor_frame} from TF")
-
-    def _on_worker_error(self, item: Any, exc: BaseException) -> None:
-        """A scan whose processing raised: counted, logged, and an ERROR verdict (no scan goes unreported)."""
-        if self.context.ok():  # else shutting down: the publishers are gone, nothing failed
-            self._report(self._scan_status.error(exc, _stamp_of(item)))
-
-    # -- reporting (any thread) ------------------------------------------------------------------------------
-    def _report(self, outcome: Outcome) -> None:
-        if outcome.error is not None:
-            self.get_logger().error(outcome.error)
-        self._log_warnings(outcome.warnings)
-        if outcome.verdict is not None:
-            self._outputs.scan_status(outcome.verdict)
-
-    def _warn(self, kind: str, message: str) -> None:
-        self._log_warnings(self._scan_status.throttled(kind, message))
-
-    def _log_warnings(self, lines: list[str]) -> None:
-        for line in lines:
-            self.get_logger().warn(line)
-
-    def _publish_local_map(self) -> None:
-        if self._outputs.wants_map():
-            points = self._session.map_in_odom()
-            if points is not None:
-                self._outputs.local_map(points)
-
-    def _publish_diagnostics(self) -> None:
-        self._outputs.diagnostics(self._status.report(self._worker.stats(), self._session.scale,
-                                                      self.count_publishers(self._input_topic)))
+        self.alignment.engine_ready(seconds)
 
     def destroy_node(self) -> None:
         self._session.close()  # a worker waiting for the engine gives up
-        self._worker.close()
+        self.alignment.destroy()
         super().destroy_node()
 
 
-def _stamp_of(item: Any) -> int:
-    """The stamp of a queued item: a scan (sequential mode) or a (source, target) pair (its source's)."""
-    return item.stamp_ns if isinstance(item, Incoming) else item[0].stamp_ns
+def new_session(cfg: NodeConfig, pipeline_config: Any) -> tuple[AlignerSession, ExtrinsicHold]:
+    """An aligner session (not loaded yet) and the extrinsic its outputs use, base_to_sensor until TF gives one."""
+    extrinsic = ExtrinsicHold(pose_from_xyz_rpy(cfg.base_to_sensor))
+    return AlignerSession(pipeline_config, cfg, BaseFrame(extrinsic.T_base_sensor)), extrinsic
+
+
+def log_parameters(node: Node, cfg: NodeConfig, pipeline_config: Any) -> None:
+    node.get_logger().info("parameters in force: " + ", ".join(
+        f"{k}={v}" for k, v in {**config_values(cfg), **config_values(pipeline_config)}.items()))
 
 
 def main(args: Optional[list] = None) -> None:
     """Spin until SIGINT; a fatal configuration or engine error is one line on stderr and exit status 2."""
-    rclpy.init(args=args)
-    node, error = None, None
-    try:
-        node = AlignNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while rclpy.ok() and node.fatal_error is None:
-            executor.spin_once(timeout_sec=0.25)
-        error = node.fatal_error
-    except (ConfigError, ParameterException) as exc:
-        error = str(exc).splitlines()[0]
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if error:
-        print(f"align_node: error: {error}", file=sys.stderr)
-        sys.exit(2)
+    run(AlignNode, "align_node", args)
 
 
 if __name__ == "__main__":

@@ -44,6 +44,13 @@ class NodeOutputs:
             node.get_logger().warn("tf2_msgs is not importable: /tf is not published (pip install: run "
                                    "scripts/build_tf2_msgs.sh; a full ROS install has it)")
 
+    def destroy(self) -> None:
+        """Destroy the publishers (a lifecycle node's deactivate)."""
+        for publisher in (self._pose, self._odom, self._cloud, self._map, self._diagnostics, self._scan_status,
+                          self._tf):
+            if publisher is not None:
+                self._node.destroy_publisher(publisher)
+
     def step(self, result: StepResult, source: Any, frame: str) -> None:
         """Pose, odometry, aligned cloud and TF of one step, in ``frame`` at the stamp of ``source`` (the decoded
         scan: msg + points). The numbers are cemnet-replay's too (pipeline/node/odometry_output.py), and so are the

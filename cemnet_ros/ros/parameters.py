@@ -33,13 +33,23 @@ def descriptor(p: Any) -> ParameterDescriptor:
 
 def declare_and_read(node: Node) -> tuple[NodeConfig, AlignerConfig]:
     """Declare every parameter, read them into the two configs; ConfigError names the bad one."""
-    schema = node_parameters()
-    for name, p in schema.items():
+    declare(node)
+    return read(node)
+
+
+def declare(node: Node) -> None:
+    """Declare every parameter of the schema (an override of the wrong type: ConfigError)."""
+    for name, p in node_parameters().items():
         try:
             node.declare_parameter(name, list(p.default) if p.kind is tuple else p.default, descriptor(p))
         except ParameterException as exc:
             allowed = f" (allowed: {p.describe()})"
             raise ConfigError(f"parameter {name}: {str(exc).splitlines()[0]}{allowed}") from None
+
+
+def read(node: Node) -> tuple[NodeConfig, AlignerConfig]:
+    """The declared parameters as the two configs; ConfigError names a bad value or weights file."""
+    schema = node_parameters()
     try:
         node_cfg, pipeline = configs_from_parameters({n: node.get_parameter(n).value for n in schema})
     except (ValueError, TypeError) as exc:

@@ -19,10 +19,16 @@ class NodeServices:
     def __init__(self, node: Node, session: AlignerSession, odom_frame: str,
                  warn: Callable[[str, str], None]) -> None:
         self._node, self._session, self._odom_frame, self._warn = node, session, odom_frame, warn
-        node.create_subscription(PoseWithCovarianceStamped, "~/set_pose", self._on_set_pose, 10)
-        node.create_service(Trigger, "~/reset", self._on_reset)
-        node.create_service(Trigger, "~/relocalize", self._on_relocalize)
-        node.create_service(Trigger, "~/save_map", self._on_save_map)
+        self._set_pose = node.create_subscription(PoseWithCovarianceStamped, "~/set_pose", self._on_set_pose, 10)
+        self._services = [node.create_service(Trigger, "~/reset", self._on_reset),
+                          node.create_service(Trigger, "~/relocalize", self._on_relocalize),
+                          node.create_service(Trigger, "~/save_map", self._on_save_map)]
+
+    def destroy(self) -> None:
+        """Destroy the services and the subscription (a lifecycle node's deactivate)."""
+        self._node.destroy_subscription(self._set_pose)
+        for service in self._services:
+            self._node.destroy_service(service)
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         return self._request("reset", response, "reset: the map and motion model restart at the next scan; "

@@ -108,7 +108,10 @@ def test_stamps_ahead_of_the_clock_or_with_bad_nanoseconds_are_refused():
     last = _stream(checks)
     with pytest.raises(ScanRejected) as info:
         checks.admit(_cloud(1000), None, (2 ** 31 - 1) * 1_000_000_000, "lidar", now_ns=last + PERIOD)
-    assert info.value.kind == "stamp_future"
+    assert info.value.kind == "stamp_future" and "clock reads 0" not in str(info.value)
+    with pytest.raises(ScanRejected) as info:  # ROS time unset: use_sim_time before the first /clock
+        InputChecks(InputChecksConfig()).admit(_cloud(1000), None, 1_700_000_000 * 10 ** 9, "lidar", now_ns=0)
+    assert info.value.kind == "stamp_future" and "clock reads 0" in str(info.value) and "/clock" in str(info.value)
     with pytest.raises(ScanRejected) as info:
         stamp_ns(5, 2 ** 32 - 1)
     assert info.value.kind == "stamp"

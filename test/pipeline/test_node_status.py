@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from cemnet_ros.pipeline.node.node_status import ERROR, OK, WARN, NodeStatus
+from cemnet_ros.pipeline.node.node_status import CLOCK_GRACE_S, ERROR, OK, WARN, NodeStatus
 from cemnet_ros.pipeline.node.pairing import PairMatcher
 
 
@@ -57,3 +57,35 @@ def test_pairs_match_by_stamp_and_report_hopeless_sources():
     latest = PairMatcher(tolerance_ns=0, pending_limit=2, target_depth=1)
     latest.add_target(scan(0))
     assert latest.add_source(scan(10_000))[0][0][1].stamp_ns == 0  # tolerance 0: always the latest target
+
+
+def test_the_dds_profile_hint_only_when_matched_publishers_never_delivered():
+    clock = Clock()
+    status = NodeStatus(input_timeout=1.0, clock=clock)
+    status.ready = True
+    clock.now += 1.5
+    report = status.report(stats(), None, publishers=1)
+    assert report.level == WARN and "1 publisher(s) are matched" in report.message and "fastdds" in report.message
+    status.input_arrived()  # the transport delivers; the input stops later (the sensor paused, a bag ended)
+    clock.now += 1.5
+    report = status.report(stats(), None, publishers=1)
+    assert report.level == WARN and "no input for 1.5 s" in report.message
+    assert "matched" not in report.message and "fastdds" not in report.message
+
+
+def test_scans_without_a_clock_under_sim_time_warn_after_a_grace_period():
+    clock = Clock()
+    status = NodeStatus(input_timeout=10.0, clock=clock)
+    status.ready = True
+    assert status.missing_clock(clock_unset=True) is None  # no scan yet: nothing to say
+    status.input_arrived()
+    clock.now += CLOCK_GRACE_S - 0.5
+    assert status.missing_clock(clock_unset=True) is None
+    assert status.report(stats(), None, clock_unset=True).level == OK
+    clock.now += 1.0
+    status.input_arrived()
+    assert status.missing_clock(clock_unset=False) is None
+    report = status.report(stats(), None, clock_unset=True)
+    assert report.level == WARN and report.values["ros_time_unset"] is True
+    assert "use_sim_time is true but no /clock has arrived" in report.message and "--clock" in report.message
+    assert status.report(stats(), None, clock_unset=False).level == OK

@@ -14,7 +14,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 import rclpy  # noqa: E402
 from builtin_interfaces.msg import Time  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from geometry_msgs.msg import PoseStamped  # noqa: E402
+from geometry_msgs.msg import PoseStamped, Quaternion, TransformStamped, Vector3  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
@@ -24,6 +24,7 @@ from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 from street_scene import make_transform, make_world, street_scan  # noqa: E402
 
+from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy  # noqa: E402
 from cemnet_ros.pointcloud2 import make_pointcloud2  # noqa: E402
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
 from cemnet_ros.ros.outputs import TFMessage  # noqa: E402
@@ -33,6 +34,7 @@ FAST = {"registration.cem.n_candidates": 300, "registration.cem.n_iters": 6, "qo
 FIRST_TIMEOUT = 120.0  # the first registration loads the engine (a cold machine, a busy one: minutes)
 
 WORLD = make_world()
+EXTRINSIC = (0.3, -0.1, 1.7, 0.01, -0.02, 0.5)  # a sensor's pose on the base (x y z roll pitch yaw)
 POSES = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
 
 
@@ -57,6 +59,28 @@ def pose_of(msg):
     return out
 
 
+
+
+class StandInBuffer:
+    """tf2_ros.Buffer's lookup_transform: raises until :attr:`transform` is set (TF not up yet)."""
+
+    def __init__(self):
+        self.transform = None
+
+    def lookup_transform(self, target, source, _time):
+        if self.transform is None:
+            raise LookupError(f"{target} <- {source}: no transform yet")
+        return self.transform
+
+
+def transform(xyz_rpy):
+    """A TransformStamped of (x, y, z, roll, pitch, yaw), as a TF lookup returns it."""
+    T = pose_from_xyz_rpy(xyz_rpy)
+    msg = TransformStamped()
+    msg.transform.translation = Vector3(x=T[0, 3], y=T[1, 3], z=T[2, 3])
+    x, y, z, w = Rotation.from_matrix(T[:3, :3]).as_quat()
+    msg.transform.rotation = Quaternion(x=x, y=y, z=z, w=w)
+    return msg
 
 
 def wait_for(predicate, timeout):

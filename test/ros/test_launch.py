@@ -56,7 +56,7 @@ def test_launch_arguments_and_defaults():
     arguments = _declared_arguments(launch_tree())
     defaults = {name: constant(default) for name, (default, _) in arguments.items()}
     assert defaults == {"input_topic": "points", "params_file": None, "use_sim_time": "false", "odom_frame": "odom",
-                        "base_frame": "base_link", "rviz": "true", "bag": "", "dds_profile": None}
+                        "base_frame": "base_link", "rviz": "auto", "bag": "", "dds_profile": None}
     assert all(description for _, description in arguments.values()), "every argument has a description"
     assert "use_sim_time:=true" in arguments["bag"][1]
 
@@ -113,10 +113,16 @@ def test_files_the_launch_file_takes_from_its_share_exist_and_are_installed():
         assert relative in installed, f"setup.py does not install {relative} into share/{PACKAGE}"
 
 
-def test_rviz_and_the_bag_replay_are_conditional():
+def test_rviz_the_dds_profile_and_the_bag_replay_are_decided_before_any_process_starts():
     tree = launch_tree()
+    (start,) = [call for call in calls(tree, "OpaqueFunction")]
+    assert [getattr(arg, "id", None) for arg in keyword(start, "args").elts] == ["rviz", "bag_play", "align_node"]
+    (decide,) = [node for node in ast.walk(tree) if isinstance(node, ast.FunctionDef) and node.name == "_start"]
+    chosen = {call.func.id: _referenced_arguments(call.args[0], tree) for call in ast.walk(decide)
+              if isinstance(call, ast.Call) and getattr(call.func, "id", None) in ("rviz_wanted", "dds_profile_file")}
+    assert chosen == {"rviz_wanted": {"rviz"}, "dds_profile_file": {"dds_profile"}}
     (rviz,) = [call for call in calls(tree, "Node") if constant(keyword(call, "package")) == "rviz2"]
-    assert _referenced_arguments(keyword(rviz, "condition"), tree) == {"rviz"}
+    assert keyword(rviz, "condition") is None, "rviz_wanted decides, not a condition on the raw argument"
     (bag,) = calls(tree, "ExecuteProcess")
     command = keyword(bag, "cmd").elts
     assert [constant(word) for word in command[:3]] == ["ros2", "bag", "play"]

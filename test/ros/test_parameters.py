@@ -35,7 +35,7 @@ def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_n
         assert node.get_parameter("mode").value == "sequential"
         cem = node._session.config.registration.cem  # the parameters reach the pipeline's config
         assert (cem.n_iters, cem.n_candidates) == (7, params["registration.cem.n_candidates"])
-        assert node._cfg.base_frame == "robot1/base"
+        assert node.alignment._cfg.base_frame == "robot1/base"
         result = node.set_parameters([Parameter("registration.n_points", value=100)])[0]  # read-only
         assert not result.successful
     finally:

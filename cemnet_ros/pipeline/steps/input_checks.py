@@ -107,8 +107,9 @@ class InputChecks:
         if stamp_ns < 0:
             raise ScanRejected(f"stamp {stamp_ns * 1e-9:.3f} s is negative", "stamp")
         if now_ns is not None and cfg.future_tolerance > 0 and stamp_ns > now_ns + cfg.future_tolerance * 1e9:
+            unset = " (the clock reads 0: a node with use_sim_time has had no /clock yet)" if now_ns == 0 else ""
             raise ScanRejected(f"stamp {stamp_ns * 1e-9:.3f} s is {(stamp_ns - now_ns) * 1e-9:.1f} s ahead of the "
-                               "clock", "stamp_future")
+                               f"clock{unset}", "stamp_future")
         if self._last_stamp is None or cfg.stamp_jump <= 0:
             return
         period = float(np.median(self._periods)) if self._periods else 0.0

@@ -1,0 +1,220 @@
+"""``ros2 launch cemnet_ros align_node.launch.py`` for real, from a colcon-like install (test/ros/install_layout.py);
+skips without the launch system and ros2 CLI (./run installs them from ../shared/ros2)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
+
+import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from install_layout import add_stand_in_executable, make_install_prefix, ros2_cli_missing, ros_environment  # noqa: E402
+from lifecycle_msgs.msg import Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
+from nav_msgs.msg import Odometry  # noqa: E402
+from node_harness import FIRST_TIMEOUT, pose_of, read_bag, wait_for  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from ros_cli import domain_id, interrupt, kill_group, param_dump, start  # noqa: E402
+from sensor_msgs.msg import PointCloud2  # noqa: E402
+
+from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
+from cemnet_ros.ros.node_config import node_parameters  # noqa: E402
+
+pytestmark = [pytest.mark.dds, pytest.mark.skipif(bool(ros2_cli_missing()), reason=ros2_cli_missing() or "-")]
+LAUNCH = ["ros2", "launch", "cemnet_ros", "align_node.launch.py"]
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def install_prefix(tmp_path_factory):
+    return make_install_prefix(tmp_path_factory.mktemp("colcon") / "install")
+
+
+def test_rviz_true_without_rviz2_fails_clearly_before_starting_the_node(install_prefix):
+    run = subprocess.run([*LAUNCH, "rviz:=true"], env=ros_environment(install_prefix, 211), capture_output=True,
+                         text=True, timeout=60)
+    output = run.stdout + run.stderr
+    assert run.returncode != 0, output
+    assert "rviz:=true but the rviz2 package is not installed" in output, output
+    assert "process started" not in output, "a process was started although the launch failed"
+
+
+def test_a_missing_dds_profile_fails_clearly_before_starting_the_node(install_prefix, tmp_path):
+    run = subprocess.run([*LAUNCH, f"dds_profile:={tmp_path / 'missing.xml'}"],
+                         env=ros_environment(install_prefix, 212), capture_output=True, text=True, timeout=60)
+    output = run.stdout + run.stderr
+    assert run.returncode != 0 and "no such file" in output and "process started" not in output, output
+
+
+def test_rviz_auto_starts_rviz2_where_it_is_installed(install_prefix, tmp_path):
+    stand_in = tmp_path / "rviz_install"
+    add_stand_in_executable(stand_in, "rviz2", "rviz2", 'echo "stand-in rviz2 $*"; exec sleep 120')
+    env = ros_environment(install_prefix, domain_id())
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(stand_in), env["AMENT_PREFIX_PATH"]])
+    launch, output = start(LAUNCH, env)
+    try:
+        assert output.wait_for("stand-in rviz2 -d", 60.0), output.text()
+        assert output.wait_for("align_node subscribed", 60.0), output.text()
+        interrupt(launch)
+    finally:
+        kill_group(launch)
+    assert "share/cemnet_ros/rviz/cemnet_ros.rviz" in output.text(timeout=10.0), output.text()
+
+
+@pytest.mark.parametrize("argument, expected", [
+    ([], "share/cemnet_ros/config/fastdds_large_data.xml"), (["dds_profile:=none"], None)])
+def test_the_node_gets_the_dds_profile_or_none_at_all(install_prefix, argument, expected):
+    env = ros_environment(install_prefix, domain_id())
+    env.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
+    launch, output = start([*LAUNCH, *argument], env)
+    try:
+        assert output.wait_for("process started with pid", 60.0), output.text()
+        pid = int(next(line for line in output.lines if "process started with pid" in line).split("[")[-1][:-2])
+        environment = dict(entry.split("=", 1) for entry in
+                           Path(f"/proc/{pid}/environ").read_text().split("\0") if "=" in entry)
+        interrupt(launch)
+    finally:
+        kill_group(launch)
+    profile = environment.get("FASTRTPS_DEFAULT_PROFILES_FILE")
+    assert profile is None if expected is None else profile.endswith(expected), profile
+    assert launch.returncode == 0 and "XML" not in output.text(timeout=10.0), output.text()
+
+
+def test_ros2_run_starts_the_lifecycle_node_unconfigured_and_configure_loads_it(install_prefix):
+    domain = domain_id()
+    node, output = start(["ros2", "run", "cemnet_ros", "align_lifecycle_node"], ros_environment(install_prefix, domain))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    client_node = rclpy.create_node("lifecycle_client", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(client_node)
+    try:
+        get = client_node.create_client(GetState, "/align_node/get_state")
+        change = client_node.create_client(ChangeState, "/align_node/change_state")
+        assert get.wait_for_service(60.0) and change.wait_for_service(10.0), output.text()
+
+        def call(client, request):
+            future = client.call_async(request)
+            executor.spin_until_future_complete(future, timeout_sec=FIRST_TIMEOUT)
+            assert future.done(), output.text()
+            return future.result()
+
+        assert call(get, GetState.Request()).current_state.label == "unconfigured"
+        configure = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE))
+        assert call(change, configure).success, output.text()
+        assert call(get, GetState.Request()).current_state.label == "inactive"
+        interrupt(node)
+    finally:
+        executor.shutdown()
+        client_node.destroy_node()
+        rclpy.shutdown(context=context)
+        kill_group(node)
+    assert node.returncode == 0 and "configured: engine ready" in output.text(timeout=10.0), output.text()
+    assert "Traceback" not in output.text(), output.text()
+
+
+@pytest.mark.slow
+def test_the_default_launch_runs_headless_aligns_the_kitti_scans_dumps_its_parameters_and_stops_on_ctrl_c(
+        install_prefix, context, tmp_path, monkeypatch):
+    """The user's day: ``ros2 launch`` with the defaults (no RViz2 here), a driver's scans, the odometry against
+    the ground truth, ``ros2 param dump`` loaded by a new node, Ctrl-C."""
+    kitti = REPO / "bags" / "kitti_00_6scans.mcap"
+    if not kitti.is_file():
+        pytest.skip("bags/kitti_00_6scans.mcap missing")
+    clouds, truth = read_bag(kitti)
+    domain = domain_id()
+    env = ros_environment(install_prefix, domain)
+    monkeypatch.setenv("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO / "config" / "fastdds_large_data.xml"))
+    launch, output = start(LAUNCH, env)
+    driver = None
+    try:
+        driver = Driver(domain)
+        assert output.wait_for("engine ready", FIRST_TIMEOUT), output.text()
+        assert "rviz" not in output.text().lower(), output.text()
+        estimates = [pose_of(driver.send(raw)) for _, raw in clouds]
+        dump = param_dump(env)
+        interrupt(launch)  # the node gets a SIGINT from the terminal and one from launch
+    finally:
+        if driver is not None:
+            driver.close()
+        kill_group(launch)
+    log = output.text(timeout=10.0)
+    gt = [np.linalg.inv(truth[clouds[0][0]]) @ truth[ns] for ns, _ in clouds]
+    for k in range(1, len(gt)):  # the per-pair floor of the KITTI bag (test_node_bags.py)
+        trans_err, rot_err = relative_error(np.linalg.inv(estimates[k - 1]) @ estimates[k],
+                                            np.linalg.inv(gt[k - 1]) @ gt[k])
+        assert trans_err <= 0.05 and rot_err <= 0.2, (k, trans_err, rot_err)
+    assert launch.returncode == 0 and "process has finished cleanly" in log, log
+    assert "Traceback" not in log and "XML" not in log, log
+    dumped = _flat(yaml.safe_load(dump.stdout)["/align_node"]["ros__parameters"])
+    params_file = tmp_path / "dumped.yaml"
+    params_file.write_text(dump.stdout)
+    node = AlignNode(context=context, cli_args=["--ros-args", "--params-file", str(params_file)])
+    try:
+        reloaded = {name: node.get_parameter(name).value for name in node_parameters()}
+    finally:
+        node.destroy_node()
+    assert {name: dumped[name] for name in reloaded} == {name: _plain(value) for name, value in reloaded.items()}
+
+
+def _flat(tree: dict, prefix: str = "") -> dict:
+    """``ros2 param dump`` nests dotted names ({"checks": {"max_points": ...}}): back to "checks.max_points"."""
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _plain(value):
+    """A parameter value as YAML loads it (arrays come back as lists)."""
+    return list(value) if isinstance(value, (tuple, np.ndarray)) or type(value).__name__ == "array" else value
+
+
+class Driver:
+    """The sensor driver's side: publishes raw PointCloud2 CDR on /points, collects /align_node/odometry."""
+
+    def __init__(self, domain_id: int):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node("kitti_driver", context=self.context)
+        self.points = self.node.create_publisher(PointCloud2, "/points", 10)
+        self.odometry: list = []
+        self.node.create_subscription(Odometry, "/align_node/odometry", self.odometry.append, 50)
+        self.publishers_seen = 0  # by the node, from its diagnostics: it has matched this publisher
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        # Best effort (the node's default QoS) drops what is sent before both sides have matched each other.
+        assert wait_for(lambda: self.points.get_subscription_count() > 0 and self.publishers_seen > 0, 30.0), \
+            "align_node never subscribed"
+
+    def _on_diagnostics(self, msg) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if status.name.startswith("/align_node") and values.get("input_publishers", "0").isdigit():
+                self.publishers_seen = max(self.publishers_seen, int(values["input_publishers"]))
+
+    def send(self, raw: bytes):
+        count = len(self.odometry)
+        self.points.publish(raw)
+        assert wait_for(lambda: len(self.odometry) > count, 120.0), "no odometry"
+        return self.odometry[-1]
+
+    def close(self):
+        self.executor.shutdown()
+        self.thread.join(10)
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
