@@ -6,10 +6,11 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
 1. **preprocess** (:mod:`.steps.frame`, :mod:`.steps.sweep`): deskew, drop non-finite points, crop by range, voxel grid;
    the CEM's subset and the polish's subset;
 2. **predict**: the constant-velocity pose, and how far to search around it (:class:`AdaptiveSpread`);
-3. **track** (:mod:`.steps.tracking`): the prediction polished point to plane against the map, standing when
-   the polish stayed within its reach and the answer is confirmed; else the CEM around the prediction against
-   a sample of the map, then the polish; an answer beyond the polish's reach of the prediction competes with
-   the prediction and the last pose, each polished from afar (:mod:`.steps.contest`);
+3. **track** (:mod:`.steps.tracking`): the cheapest credible start first, stopping once an answer stands
+   (confirmed, and explained by the prediction): the prediction polished point to plane against the map, where
+   its recent errors lie within the polish's reach; else the CEM around the prediction against a sample of the
+   map, its answer polished from afar; then the prediction and the last pose from afar, competing
+   (:mod:`.steps.contest`);
 4. **judge** the step without ground truth (:mod:`.steps.verdict`: fitness in metres, confirmation,
    conditioning);
 5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit

@@ -2,8 +2,9 @@
 
 **check** ``input_checks``; **preprocess** ``frame`` (units, the frame's subsets), ``preprocess`` (crop, voxel
 grid, subsets), ``sweep`` and ``deskew`` (motion compensation); **predict** ``motion`` (constant velocity) and
-``adaptive`` (how far to search); **track** ``tracking`` (the CEM, then the polish: ``basin`` its wide GICP stage,
-``refine`` the point-to-plane ICP); **judge** ``verdict``, ``health`` (failure signals), ``covariance`` (from the
-polish's Hessian) and ``hypotheses`` (competing answers); **recover** ``recovery`` (the global search). Import
+``adaptive`` (how far to search); **track** ``tracking`` (the order of the starts), ``contest`` (polish a start,
+judge it, does it stand, choose), ``polish`` (fine, basin, wide: ``refine`` the point-to-plane ICP, ``basin`` the
+GICP stage) and ``metric_cem`` (the engine in metres); **judge** ``verdict``, ``health`` (failure signals) and
+``covariance`` (from the polish's Hessian); **recover** ``recovery`` (the global search). Import
 from the modules; this package stays import-light (no torch: ``recovery`` imports it, the ROS layer does not).
 """

@@ -88,7 +88,6 @@ class Contest:
         answer = self.judge.judge(self.polisher.frame, self.polisher.map, self.T_predicted, T_start, polish,
                                   spread_m, recovered=self.recovered, prediction_std=self.prediction_std,
                                   origin=origin.value)
-        answer.converged = polish.iterations < self.polisher.iters
         answer.explained = self.polisher.within_reach(polish, self.T_predicted)
         self.answers.append(answer)
         self._arrivals.append((origin, answer.T_odom_sensor))

@@ -8,6 +8,7 @@ scan must not fix the units of the trajectory.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Optional
 
 import numpy as np
@@ -44,7 +45,7 @@ class Frame:
             self._gicp[voxel] = gicp_cloud(self.dense, voxel)
         return self._gicp[voxel]
 
-    @property
+    @cached_property
     def length(self) -> float:
         """RMS range of the polish points: the lever arm that makes rotations comparable to translations."""
         return float(np.sqrt(np.mean(np.sum(self.polish ** 2, axis=1)))) or 1.0

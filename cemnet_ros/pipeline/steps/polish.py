@@ -4,7 +4,8 @@
   steps run on a stride of the polish points (``polish.coarse_stride``), the last ones and the Hessian on all;
 * **basin**: GICP of the scan against the map's last scan (:mod:`.basin`), pairs within ``polish.wide_distance``
   frame voxels: it finds the basin from a start a metre or tens of degrees off;
-* **wide**: the basin, then fine.
+* **wide**: the basin, then fine (:meth:`.contest.Contest.enter`, which skips the fine stage when the basin is an
+  answer already there).
 
 A polish *converged within reach* of a pose when it stopped before its budget and its answer lies within its
 pairing distance of that pose (translation + RMS range x rotation): the pose was already in the basin the polish
@@ -63,10 +64,6 @@ class Polisher:
         return gicp(self.map.last_scan, self.frame.gicp_cloud(self.map.gicp_voxel), T_start,
                     cfg.wide_distance * self.frame.polish_voxel, max(1, round(self.effort * cfg.wide_iters)),
                     (settled_m, settled_m / self.frame.length))
-
-    def wide(self, T_start: np.ndarray) -> PolishResult:
-        """:meth:`basin`, then :meth:`fine`: for a start that may be a metre or degrees off."""
-        return self.fine(self.basin(T_start))
 
     def within_reach(self, polish: PolishResult, T_pose: np.ndarray) -> bool:
         """``polish`` converged before its budget, within :attr:`reach` of ``T_pose`` (see the module)."""

@@ -1,14 +1,15 @@
 """Tracking (step 3 of the recipe in :mod:`..aligner`): the cheapest credible start first, stop once one stands.
 
-1. **the prediction**, finely polished against the map: it stands when the polish converged within its reach and
-   the answer is confirmed (the way a local method tracks; smooth motion ends here);
-2. **the CEM** around the prediction, in the engine's units, against a sample of the map near the predicted
-   sensor position, with a spread that the recent prediction errors set (:class:`~.adaptive.AdaptiveSpread`);
-   its answer, finely polished, stands when the prediction explains it: within reach, or reached by the
-   prediction's polish too, within the prediction's spread;
-3. **from afar**: the prediction and (when its fine polish did not converge) the CEM's answer, each polished
-   wide (:mod:`.polish`; a basin already found only adds support), then, unless one stands, the last pose;
-   the fittest wins, near-ties go to the nearest (:mod:`.contest`).
+An answer stands when it is confirmed and the prediction explains it (:mod:`.contest`). The starts, in order:
+
+1. **the prediction**, finely polished against the map, when its recent errors lie within the polish's reach
+   (the way a local method tracks; smooth motion ends here);
+2. **the CEM** around the prediction, in the engine's units (:mod:`.metric_cem`), against a sample of the map
+   near the predicted sensor position, with a spread that the recent prediction errors set
+   (:class:`~.adaptive.AdaptiveSpread`); its answer polished wide (:mod:`.polish`: GICP, then fine);
+3. **the prediction from afar**: its GICP stage, which on a handheld turn usually lands on the CEM's answer
+   (two kinds of start agree);
+4. **the last pose from afar**; then the fittest answer wins, near-ties go to the nearest.
 """
 from __future__ import annotations
 

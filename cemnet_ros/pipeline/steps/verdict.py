@@ -65,7 +65,6 @@ class Estimate:
     origin: str = ""  # the kind of start it was polished from: cem, prediction, last pose, search
     tied: bool = False  # chosen among distinct near-ties (:mod:`.contest`): its pose is a guess among equals
     support: int = 1  # how many kinds of the competing starts reached this answer (:mod:`.contest`)
-    converged: bool = True  # its polish stopped before its budget
     explained: bool = False  # its polish converged within reach of the prediction (:mod:`.polish`)
 
     def offset_from(self, T_reference: np.ndarray) -> tuple[float, float]:
