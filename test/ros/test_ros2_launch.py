@@ -14,6 +14,7 @@ import yaml
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
 
 import rclpy  # noqa: E402
+from builtin_interfaces.msg import Time  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from install_layout import add_stand_in_executable, make_install_prefix, ros2_cli_missing, ros_environment  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
@@ -22,6 +23,7 @@ from nav_msgs.msg import Odometry  # noqa: E402
 from node_harness import FIRST_TIMEOUT, pose_of, read_bag, wait_for  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from ros_cli import domain_id, interrupt, kill_group, param_dump, start  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
 from cemnet_ros.bench.metrics import relative_error  # noqa: E402
@@ -165,6 +167,54 @@ def test_the_default_launch_runs_headless_aligns_the_kitti_scans_dumps_its_param
     assert {name: dumped[name] for name in reloaded} == {name: _plain(value) for name, value in reloaded.items()}
 
 
+ROBOT_LAUNCH = """
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import GroupAction, IncludeLaunchDescription
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch_ros.actions import PushRosNamespace
+
+
+def generate_launch_description():
+    included = os.path.join(get_package_share_directory("cemnet_ros"), "launch", "align_node.launch.py")
+    return LaunchDescription([GroupAction([
+        PushRosNamespace("robot"),
+        IncludeLaunchDescription(PythonLaunchDescriptionSource(included),
+                                 launch_arguments={"use_sim_time": "true"}.items()),
+    ])])
+"""
+
+
+@pytest.mark.slow
+def test_an_include_under_a_namespace_runs_on_the_sim_time_of_clock(install_prefix, tmp_path):
+    """A robot's launch file includes ours under /robot with use_sim_time: the node takes /robot/points, answers
+    on /robot/align_node/odometry, and accepts scans stamped at the simulated /clock (years behind the wall
+    clock: without /clock they would be ahead of a clock at 0, and rejected)."""
+    kitti = REPO / "bags" / "kitti_00_6scans.mcap"
+    if not kitti.is_file():
+        pytest.skip("bags/kitti_00_6scans.mcap missing")
+    clouds, _ = read_bag(kitti)
+    robot_launch = tmp_path / "robot.launch.py"
+    robot_launch.write_text(ROBOT_LAUNCH)
+    domain = domain_id()
+    launch, output = start(["ros2", "launch", str(robot_launch)], ros_environment(install_prefix, domain))
+    driver = None
+    try:
+        driver = Driver(domain, "/robot", clock=True)
+        assert output.wait_for("engine ready", FIRST_TIMEOUT), output.text()
+        odometry = [driver.send(raw, ns) for ns, raw in clouds[:3]]
+        interrupt(launch)
+    finally:
+        if driver is not None:
+            driver.close()
+        kill_group(launch)
+    stamps = [o.header.stamp.sec * 10 ** 9 + o.header.stamp.nanosec for o in odometry]
+    assert stamps == [ns for ns, _ in clouds[:3]], (stamps, output.text())
+    assert launch.returncode == 0 and "Traceback" not in output.text(timeout=10.0), output.text()
+
+
 def _flat(tree: dict, prefix: str = "") -> dict:
     """``ros2 param dump`` nests dotted names ({"checks": {"max_points": ...}}): back to "checks.max_points"."""
     flat = {}
@@ -182,15 +232,18 @@ def _plain(value):
 
 
 class Driver:
-    """The sensor driver's side: publishes raw PointCloud2 CDR on /points, collects /align_node/odometry."""
+    """The sensor driver's side: publishes raw PointCloud2 CDR on ``namespace``/points (with ``clock``, /clock at
+    each scan's stamp first, as a simulator or ``ros2 bag play --clock``), collects the node's odometry."""
 
-    def __init__(self, domain_id: int):
+    def __init__(self, domain_id: int, namespace: str = "", clock: bool = False):
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node("kitti_driver", context=self.context)
-        self.points = self.node.create_publisher(PointCloud2, "/points", 10)
+        self.namespace = namespace
+        self.points = self.node.create_publisher(PointCloud2, f"{namespace}/points", 10)
+        self.clock = self.node.create_publisher(Clock, "/clock", 10) if clock else None
         self.odometry: list = []
-        self.node.create_subscription(Odometry, "/align_node/odometry", self.odometry.append, 50)
+        self.node.create_subscription(Odometry, f"{namespace}/align_node/odometry", self.odometry.append, 50)
         self.publishers_seen = 0  # by the node, from its diagnostics: it has matched this publisher
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -204,11 +257,14 @@ class Driver:
     def _on_diagnostics(self, msg) -> None:
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
-            if status.name.startswith("/align_node") and values.get("input_publishers", "0").isdigit():
+            if status.name.startswith(f"{self.namespace}/align_node") and values.get("input_publishers",
+                                                                                       "0").isdigit():
                 self.publishers_seen = max(self.publishers_seen, int(values["input_publishers"]))
 
-    def send(self, raw: bytes):
+    def send(self, raw: bytes, stamp_ns: int = 0):
         count = len(self.odometry)
+        if self.clock is not None:
+            self.clock.publish(Clock(clock=Time(sec=stamp_ns // 10 ** 9, nanosec=stamp_ns % 10 ** 9)))
         self.points.publish(raw)
         assert wait_for(lambda: len(self.odometry) > count, 120.0), "no odometry"
         return self.odometry[-1]
