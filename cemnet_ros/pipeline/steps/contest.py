@@ -49,7 +49,7 @@ class Contest:
     """The answers of one scan against one map, around the prediction ``T_predicted``.
 
     ``near`` (metres, radians): how far from the prediction an answer may lie and still be the prediction's (a
-    few tracking spreads). ``prediction_std`` (m): the variance kept along unconstrained directions.
+    few tracking spreads). ``prediction_std`` (m): its square is the variance kept along unconstrained directions.
     """
 
     def __init__(self, polisher: Polisher, judge: StepJudge, T_predicted: np.ndarray, near: tuple[float, float],
