@@ -98,6 +98,9 @@ def _doubled(table, bits):
     return bigger
 
 
+RECENT = 256  # voxels remembered by key outside the hash table (a power of two): a scan revisits them
+
+
 @kernel
 def _voxel_centroids(points, voxel_size):
     """Centroid per voxel floor(p / voxel_size), in one pass through a hash table of int64 voxel keys.
@@ -120,13 +123,15 @@ def _voxel_centroids(points, voxel_size):
     sums = np.empty((n, 3))
     counts = np.empty(n, dtype=np.int64)
     n_voxels = 0
-    last_key, v = -1, -1
+    recent = np.full((RECENT, 2), -1, dtype=np.int64)  # (key, voxel) of recently seen voxels, by key % RECENT
     for i in range(n):
         x, y, z = points[i, 0], points[i, 1], points[i, 2]
         key = ((np.int64(np.floor(x / voxel_size)) - lo[0]) * dim_y
                + np.int64(np.floor(y / voxel_size)) - lo[1]) * dim_z + np.int64(np.floor(z / voxel_size)) - lo[2]
-        if key != last_key:
-            last_key = key
+        r = key & (RECENT - 1)
+        if recent[r, 0] == key:
+            v = recent[r, 1]
+        else:
             j = _hash_slot(table, key, np.uint64(64 - bits))
             if table[j, 0] == -1:
                 table[j, 0], table[j, 1] = key, n_voxels
@@ -134,6 +139,7 @@ def _voxel_centroids(points, voxel_size):
                 counts[n_voxels] = 0
                 n_voxels += 1
             v = table[j, 1]
+            recent[r, 0], recent[r, 1] = key, v
             if 2 * n_voxels > table.shape[0]:
                 table = _doubled(table, bits)
                 bits += 1
