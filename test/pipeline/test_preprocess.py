@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from cemnet_ros.pipeline.steps.preprocess import (
-    crop_range,
     farthest_point_indices,
+    finite_in_range,
     finite_points,
     robust_radius,
     subsample,
@@ -16,10 +16,14 @@ def test_finite_and_crop():
     pts = np.array([[1, 0, 0], [np.nan, 0, 0], [5, 0, 0], [0, 20, 0], [0, 0, np.inf]], dtype=float)
     fin = finite_points(pts)
     assert len(fin) == 3
-    np.testing.assert_array_equal(crop_range(fin, 2.0, 10.0), [[5, 0, 0]])
-    np.testing.assert_array_equal(crop_range(fin, 0.0, 0.0), fin)
+    np.testing.assert_array_equal(finite_in_range(pts, 2.0, 10.0), [[5, 0, 0]])
+    np.testing.assert_array_equal(finite_in_range(pts, 0.0, 0.0), fin)
+    np.testing.assert_array_equal(finite_in_range(pts, 2.0, 0.0), [[5, 0, 0], [0, 20, 0]])  # no inf beyond "no max"
+    np.testing.assert_array_equal(finite_in_range(pts.astype(np.float32), 0.0, 10.0), [[1, 0, 0], [5, 0, 0]])
     with pytest.raises(ValueError):
         finite_points(np.zeros((3, 2)))
+    with pytest.raises(ValueError):
+        finite_in_range(np.zeros((3, 2)), 1.0, 2.0)
 
 
 def test_voxel_downsample_takes_centroids():

@@ -17,7 +17,7 @@ from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
-from cemnet_ros.pipeline.steps.preprocess import crop_range, finite_points, robust_radius, subsample, voxel_downsample
+from cemnet_ros.pipeline.steps.preprocess import finite_in_range, robust_radius, subsample, voxel_downsample
 
 LOST_RESCALE_RATIO = 2.0  # a lost trajectory measures the auto scale again on a scan this much larger or smaller
 
@@ -62,7 +62,7 @@ class Frame:
 
 def cropped(points: np.ndarray, config: PreprocessConfig) -> np.ndarray:
     """Finite points within the range crop (m, sensor frame); ScanRejected when fewer than ``min_points`` remain."""
-    kept = crop_range(finite_points(points), config.min_range, config.max_range)
+    kept = finite_in_range(points, config.min_range, config.max_range)
     if len(kept) < config.min_points:
         raise ScanRejected(f"too few points: {len(kept)} after range crop, need {config.min_points}",
                            "too_few_points")

@@ -23,12 +23,18 @@ def finite_points(points: np.ndarray) -> np.ndarray:
     return _finite_rows(pts)
 
 
-def crop_range(points: np.ndarray, min_range: float = 0.0, max_range: float = 0.0) -> np.ndarray:
-    """Keep points whose distance to the sensor origin lies in [min_range, max_range]; 0 disables a bound."""
+def finite_in_range(points: np.ndarray, min_range: float = 0.0, max_range: float = 0.0) -> np.ndarray:
+    """The finite rows (float64) whose distance to the sensor origin lies in [min_range, max_range], in one pass
+    over the scan; 0 disables a bound."""
     if min_range <= 0.0 and max_range <= 0.0:
-        return points
-    return _rows_in_range(np.ascontiguousarray(points), float(min_range) if min_range > 0.0 else 0.0,
-                          float(max_range) if max_range > 0.0 else np.inf)
+        return finite_points(points)
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
+    if pts.dtype not in (np.float32, np.float64):
+        pts = pts.astype(np.float64)
+    return _finite_rows_in_range(pts, float(min_range) if min_range > 0.0 else 0.0,
+                                 float(max_range) if max_range > 0.0 else np.inf)
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
@@ -58,16 +64,16 @@ def _finite_rows(points):
 
 
 @kernel
-def _rows_in_range(points, min_range, max_range):
-    """The rows of ``points`` whose norm lies in [min_range, max_range] (norm summed as numpy does)."""
+def _finite_rows_in_range(points, min_range, max_range):
+    """The rows of ``points`` with finite coordinates whose norm (in float64) lies in [min_range, max_range]."""
     keep = np.empty(points.shape[0], dtype=np.bool_)
     n = 0
     for i in range(points.shape[0]):
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        dist = np.sqrt(x * x + y * y + z * z)
-        keep[i] = min_range <= dist <= max_range
+        x, y, z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+        finite = np.isfinite(x) and np.isfinite(y) and np.isfinite(z)
+        keep[i] = finite and min_range <= np.sqrt(x * x + y * y + z * z) <= max_range
         n += keep[i]
-    out = np.empty((n, 3), dtype=points.dtype)
+    out = np.empty((n, 3))
     k = 0
     for i in range(points.shape[0]):
         if keep[i]:
@@ -195,4 +201,5 @@ def compile_kernels() -> None:
     """
     with_intensity = np.random.default_rng(0).random((16, 4)).astype(np.float32)
     finite_points(with_intensity[:, :3])
-    voxel_downsample(crop_range(finite_points(with_intensity[:, :3].astype(np.float64)), 0.1, 1.0), 0.5)
+    finite_in_range(with_intensity[:, :3], 0.1, 1.0)
+    voxel_downsample(finite_in_range(with_intensity[:, :3].astype(np.float64), 0.1, 1.0), 0.5)
