@@ -16,8 +16,8 @@ from typing import Any, Optional
 
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic_hold import ExtrinsicHold
 from cemnet_ros.ros.align_node import log_parameters, new_session
 from cemnet_ros.ros.alignment import Alignment
 from cemnet_ros.ros.node_config import NodeConfig

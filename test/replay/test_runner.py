@@ -11,7 +11,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from cemnet_ros.data import scenes
-from cemnet_ros.pipeline.node.extrinsic import pose_msg_to_matrix
+from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
 from cemnet_ros.pointcloud2 import make_pointcloud2
 from cemnet_ros.replay.bag_io import POINTCLOUD2, TYPESTORE, BagReader, SkippedMessage, ns_to_stamp, stamp_to_ns
 from cemnet_ros.replay.report import skipped_line

@@ -234,7 +234,7 @@ def test_odometry_is_the_base_frames_motion_given_an_extrinsic(harness_factory):
 
     from cemnet_ros.pipeline.aligner import ScanAligner
     from cemnet_ros.pipeline.config import AlignerConfig
-    from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy
+    from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy
     from cemnet_ros.schema import build
 
     kitti = REPO / "bags" / "kitti_00_6scans.mcap"

@@ -9,9 +9,9 @@ import pytest
 
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
-from cemnet_ros.pipeline.node.odometry_output import aligned_points
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.runtime.odometry_output import aligned_points
 from cemnet_ros.ros.node_config import NodeConfig
 
 T_BASE_SENSOR = pose_from_xyz_rpy((0.3, 0.0, 1.2, 0.0, 0.05, 0.3))
