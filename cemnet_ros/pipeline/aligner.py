@@ -32,7 +32,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from cemnet_ros.core import Registrar
-from cemnet_ros.core.geometry import apply_transform, se3_log
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
@@ -103,11 +103,8 @@ class ScanAligner:
         self._spread.reset()
         self._health.reset()
         self._pose = np.eye(4) if T_odom_sensor is None else np.asarray(T_odom_sensor, dtype=np.float64).copy()
-        self._last_stamp: Optional[int] = None
-        self._period_ns: Optional[int] = None
         self._pending_recovery = ""  # why the next scan runs the global search ("" = it tracks)
         self._failures_in_a_row = 0
-        self._last_dt_ns = 0  # the motion model's last time step
         self._T_odom_last_insert: Optional[np.ndarray] = None  # where the map last grew (a recovery's fallback)
         self._sweep.reset()
         self._pairs.reset()
@@ -134,25 +131,23 @@ class ScanAligner:
         if admitted.restart:
             self.reset(self._pose)
         points, offset_ns, self._map = self._sweep.deskewed(admitted.points, admitted.times, stamp_ns,
-                                                            self._velocity, self._last_stamp, self._map)
-        before = self._last_stamp
+                                                            self._motion.velocity, self._motion.last_stamp, self._map)
         step = self._process_at(points, stamp_ns + offset_ns, start, effort)
         self._checks.passed(admitted)
-        if before is not None and self._last_stamp is not None and self._last_stamp != before:
-            self._last_dt_ns = self._last_stamp - before  # the motion model's last time step
         step.warnings, step.effort = admitted.warnings, effort
-        return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._velocity, self._motion.has_velocity)
+        return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._motion.velocity, self._motion.has_velocity)
 
     def _process_at(self, points: np.ndarray, stamp_ns: int, start: float, effort: float) -> AlignmentStep:
         """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :mod:`.steps.sweep`)."""
         frame = self._preprocessor.frame(points)
-        if self._last_stamp is not None and stamp_ns == self._last_stamp:
+        last_stamp = self._motion.last_stamp
+        if last_stamp is not None and stamp_ns == last_stamp:
             return self._held(stamp_ns, start, frame, "duplicate stamp: scan skipped")
-        if self._map is None or self._last_stamp is None or stamp_ns < self._last_stamp:
+        if self._map is None or last_stamp is None or stamp_ns < last_stamp:
             return self._start_trajectory(frame, stamp_ns, start)
-        dt_ns = stamp_ns - self._last_stamp
+        dt_ns = stamp_ns - last_stamp
         T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
-        why, dt_ratio = self._pending_recovery, self._dt_ratio(dt_ns)
+        why, dt_ratio = self._pending_recovery, self._motion.dt_ratio(stamp_ns)
         if why:
             contest = self._tracker.contest(frame, self._map, T_predicted, dt_ratio, effort)
         else:
@@ -160,22 +155,22 @@ class ScanAligner:
                                                     effort)
             doubts = self._tracker.doubts(estimate, after_gap=dt_ns * 1e-9 > self.config.recovery.gap)
             if not doubts:
-                return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, "", start, contest)
+                return self._commit(frame, stamp_ns, T_predicted, estimate, "", start, contest)
             why = "tracking failed (" + "; ".join(doubts) + ")"
         estimate = self._recovery.recover(frame, self._map, contest, self._T_odom_last_insert, self._pose)
-        return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, why, start, contest)
+        return self._commit(frame, stamp_ns, T_predicted, estimate, why, start, contest)
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
         """The first scan (or one whose stamp went back): the map restarts from it, the pose is kept."""
-        restarted = self._last_stamp is not None
-        reason = (f"stamp went back {(self._last_stamp - stamp_ns) * 1e-9:.3f} s: restarted from this scan, "
-                  "pose kept") if self._last_stamp is not None else ""
+        last_stamp = self._motion.last_stamp
+        restarted = last_stamp is not None
+        reason = (f"stamp went back {(last_stamp - stamp_ns) * 1e-9:.3f} s: restarted from this scan, "
+                  "pose kept") if last_stamp is not None else ""
         self._preprocessor.adopt(frame)
         self._restart_map(frame, self._pose)
         self._motion.reset()
         self._motion.update(self._pose, stamp_ns)
         self._spread.reset()
-        self._last_stamp, self._period_ns = stamp_ns, None
         self._pending_recovery = "first pair"  # a single pose predicts nothing
         return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 1.0, not restarted,
                              time.perf_counter() - start, len(frame.sampled), reason)
@@ -191,10 +186,7 @@ class ScanAligner:
         self._pending_recovery = ""
         self._failures_in_a_row = 0
 
-    def _dt_ratio(self, dt_ns: int) -> float:
-        return 1.0 if not self._period_ns else dt_ns / self._period_ns
-
-    def _commit(self, frame: Frame, stamp_ns: int, dt_ns: int, T_predicted: np.ndarray, estimate: Estimate,
+    def _commit(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, estimate: Estimate,
                 why_recovered: str, start: float, contest: Contest) -> AlignmentStep:
         """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
         previous = self._pose
@@ -205,9 +197,6 @@ class ScanAligner:
             self._extend(frame, pose, T_predicted, estimate)
         self._pose = pose
         self._motion.update(pose, stamp_ns)
-        self._last_stamp = stamp_ns
-        # the usual time step: a running mean
-        self._period_ns = dt_ns if self._period_ns is None else int(0.9 * self._period_ns + 0.1 * dt_ns)
         return AlignmentStep(stamp_ns, pose.copy(), np.linalg.inv(previous) @ pose,
                              estimate.published_covariance(self.config.health.covariance_inflation),
                              estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
@@ -246,13 +235,6 @@ class ScanAligner:
         """What makes the frame's GICP cloud placed at its pose, for the map to keep as its last scan."""
         pose = T_odom_sensor.copy()
         return lambda: frame.gicp_cloud(voxel).placed(pose)
-
-    def _velocity(self) -> Optional[np.ndarray]:
-        """The motion model's twist (6,) per second: its last motion over its last time step (None: none yet)."""
-        if not self._motion.has_velocity or self._last_dt_ns <= 0 or self._last_stamp is None:
-            return None
-        last_motion = self._motion.predict_relative(self._last_stamp + self._last_dt_ns)  # ratio 1: as recorded
-        return se3_log(last_motion) / (self._last_dt_ns * 1e-9)
 
     def _held(self, stamp_ns: int, start: float, frame: Frame, reason: str) -> AlignmentStep:
         return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 0.0, False,
