@@ -26,13 +26,13 @@ odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from typing import Callable, Optional
 
 import numpy as np
 
 from cemnet_ros.core import Registrar
+from cemnet_ros.core.config import RegistrationConfig
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud
@@ -57,10 +57,10 @@ class ScanAligner:
     def __init__(self, config: Optional[AlignerConfig] = None, registrar: Optional[Registrar] = None,
                  recovery_prior: Optional[Registrar] = None) -> None:
         """``registrar``: the tracking CEM's; ``recovery_prior``: the one whose network draws part of the recovery's
-        scatter with ``recovery.prior`` 'network' (default: one loading ``recovery.weights``); built when absent."""
+        scatter with ``recovery.scatter`` 'network' (default: one loading ``recovery.weights``); built when absent."""
         self.config = config or AlignerConfig()
-        reg_prior = "network" if self.config.tracking.prior == "network" else "identity"
-        registrar = registrar or Registrar(dataclasses.replace(self.config.registration, prior=reg_prior))
+        prior = "network" if self.config.tracking.centre == "network" else "identity"  # a given centre: no network
+        registrar = registrar or Registrar(RegistrationConfig.of(self.config.registration, prior))
         self._preprocessor = Preprocessor(self.config)
         self._checks = InputChecks(self.config.checks)
         self._motion = ConstantVelocity()

@@ -199,7 +199,7 @@ def test_scans_sent_from_the_start_are_processed_or_reported(harness_factory):
 
 
 def test_pair_mode_with_a_latched_target(harness_factory, context):
-    h = harness_factory({"mode": "pair", "pair_tolerance": 0.0, "tracking.prior": "identity",
+    h = harness_factory({"mode": "pair", "pair_tolerance": 0.0, "tracking.centre": "identity",
                          "tracking.identity_sigma": 0.2},
                         input_topics=("source",), target_latched="target")
     target = scan_msg(0, pose=np.eye(4), frame="map")
