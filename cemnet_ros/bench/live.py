@@ -18,10 +18,10 @@ import numpy as np
 from cemnet_ros.bench.real import Sequence, StepResult, sequence_metrics
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.errors import ScanRejected
-from cemnet_ros.runtime.aligner_session import AlignerSession
-from cemnet_ros.runtime.extrinsic import BaseFrame
 from cemnet_ros.replay.realtime import live_summary, play_live
 from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import BaseFrame
 from cemnet_ros.schema import build
 
 KEPT = ("ate_m", "end_drift_pct", "off_accepted", "off_flagged", "flagged", "recovered_share", "ms_p50", "ms_p95",

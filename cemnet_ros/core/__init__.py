@@ -5,8 +5,8 @@ names load torch on first use.
 """
 from .config import CEMConfig, EngineConfig, RegistrationConfig
 
-__all__ = ["BatchRegistrationResult", "CEMConfig", "EngineConfig", "RegistrationConfig", "Registrar", "RegistrationResult",
-           "register"]
+__all__ = ["BatchRegistrationResult", "CEMConfig", "EngineConfig", "RegistrationConfig", "Registrar",
+           "RegistrationResult", "register"]
 
 
 def __getattr__(name: str):

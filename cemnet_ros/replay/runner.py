@@ -23,9 +23,6 @@ import numpy as np
 from tqdm import tqdm
 
 from cemnet_ros.pipeline.errors import ScanRejected
-from cemnet_ros.runtime.aligner_session import AlignerSession
-from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
-from cemnet_ros.runtime.odometry_output import OdometryOutput, aligned_points, tf_parent_child
 from cemnet_ros.replay.bag_io import (
     ODOMETRY,
     POINTCLOUD2,
@@ -41,6 +38,9 @@ from cemnet_ros.replay.bag_io import (
 )
 from cemnet_ros.replay.realtime import LiveScan, play_live
 from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.runtime.odometry_output import OdometryOutput, aligned_points, tf_parent_child
 
 NODE_NAME = "align_node"  # the node's default name: replay.mcap carries its topics, as a live run would
 POSE_TOPIC, ODOM_TOPIC, CLOUD_TOPIC = (f"/{NODE_NAME}/{name}" for name in ("pose", "odometry", "aligned_cloud"))

@@ -21,6 +21,10 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 
 from cemnet_ros.pipeline.errors import ScanRejected
+from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.ros.outputs import NodeOutputs
+from cemnet_ros.ros.scans import Incoming, Scan, decode
+from cemnet_ros.ros.services import NodeServices
 from cemnet_ros.runtime.aligner_session import AlignerSession, StepResult
 from cemnet_ros.runtime.extrinsic import BaseFrame, transform_msg_to_matrix
 from cemnet_ros.runtime.extrinsic_hold import ExtrinsicHold
@@ -28,10 +32,6 @@ from cemnet_ros.runtime.node_status import NodeStatus
 from cemnet_ros.runtime.pairing import PairMatcher
 from cemnet_ros.runtime.scan_status import Outcome, ScanStatus
 from cemnet_ros.runtime.worker import BoundedWorker
-from cemnet_ros.ros.node_config import NodeConfig
-from cemnet_ros.ros.outputs import NodeOutputs
-from cemnet_ros.ros.scans import Incoming, Scan, decode
-from cemnet_ros.ros.services import NodeServices
 
 try:  # a full ROS install only: the sensor's extrinsic from TF
     import tf2_ros

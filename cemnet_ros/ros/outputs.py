@@ -11,12 +11,12 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2, PointField
 
-from cemnet_ros.runtime.aligner_session import StepResult
-from cemnet_ros.runtime.odometry_output import aligned_points, tf_parent_child
-from cemnet_ros.runtime.scan_status import ScanVerdict
 from cemnet_ros.pointcloud2 import make_pointcloud2, transformed_cloud
 from cemnet_ros.ros import messages
 from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.runtime.aligner_session import StepResult
+from cemnet_ros.runtime.odometry_output import aligned_points, tf_parent_child
+from cemnet_ros.runtime.scan_status import ScanVerdict
 
 try:  # a full ROS install, or scripts/build_tf2_msgs.sh on the pip wheels
     from tf2_msgs.msg import TFMessage

@@ -167,10 +167,10 @@ def test_live_and_replay_fill_the_same_odometry(tmp_path):
     from rosbags.highlevel import AnyReader
     from std_msgs.msg import Header
 
-    from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
-    from cemnet_ros.runtime.odometry_output import odometry_output
     from cemnet_ros.ros import messages
     from cemnet_ros.ros.node_config import NodeConfig
+    from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
+    from cemnet_ros.runtime.odometry_output import odometry_output
 
     base = BaseFrame(pose_from_xyz_rpy(EXTRINSIC))
     rel = pose_from_xyz_rpy((0.7, 0.05, 0.01, 0.01, -0.02, 0.05))
