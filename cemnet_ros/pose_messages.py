@@ -12,7 +12,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.pipeline.node.odometry_output import UNKNOWN_VARIANCE
+from cemnet_ros.runtime.odometry_output import UNKNOWN_VARIANCE
 
 MessageTypes = Callable[[str], Any]  # full type name -> message class
 

@@ -89,11 +89,11 @@ def variants(default_scatter: int, uniform: list[float], prior: list[float], ora
 def config_for(variant: Variant, args: argparse.Namespace) -> AlignerConfig:
     """The node's defaults, with this variant's scatter and prior (the oracle plays the network's part)."""
     base = AlignerConfig()
-    search = dataclasses.replace(base.recovery.search, n_scatter=variant.n_scatter, n_prior=args.n_prior,
-                                 prior_scale=args.prior_scale, **(LEAN if variant.lean else {}))
+    search = dataclasses.replace(base.recovery.search, n_scatter=variant.n_scatter, n_network=args.n_prior,
+                                 network_scale=args.prior_scale, **(LEAN if variant.lean else {}))
     recovery = dataclasses.replace(base.recovery, search=search, weights=args.weights.get(variant.weights, ""),
                                    allow_pickle=args.allow_pickle,
-                                   prior="uniform" if variant.prior == "uniform" else "network")
+                                   scatter="uniform" if variant.prior == "uniform" else "network")
     return dataclasses.replace(base, recovery=recovery)
 
 
@@ -260,8 +260,10 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser.add_argument("--bag", type=Path, help="pairs from this bag's scans (it needs ground truth) instead of the "
                         "ray-cast large-motion pairs: --pairs per seed, as cemnet_ros.bench.pairs.bag_pairs makes them")
     parser.add_argument("--allow-pickle", action="store_true", help="allow pickled (.pth) weights you trust")
-    parser.add_argument("--n-prior", type=int, default=search.n_prior, help=f"prior draws (default {search.n_prior})")
-    parser.add_argument("--prior-scale", type=float, default=search.prior_scale, help="k: sigma0's widening")
+    parser.add_argument("--n-prior", type=int, default=search.n_network,
+                        help=f"prior draws: recovery.search.n_network (default {search.n_network})")
+    parser.add_argument("--prior-scale", type=float, default=search.network_scale,
+                        help="k: sigma0's widening (recovery.search.network_scale)")
     parser.add_argument("--oracle", action=argparse.BooleanOptionalAction, default=True,
                         help="add a prior at the true motion (default: on)")
     parser.add_argument("--oracle-sigma", type=float, nargs=6, default=[0.05, 0.02, 0.02, 0.05, 0.05, 0.01],

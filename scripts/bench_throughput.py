@@ -32,8 +32,8 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
 from cemnet_ros.bench.speed import ping_pong_cycle  # noqa: E402
 from cemnet_ros.data.kitti import kitti_scans  # noqa: E402
 from cemnet_ros.data.shared import SHARED  # noqa: E402
-from cemnet_ros.pipeline.node.worker import BoundedWorker  # noqa: E402
 from cemnet_ros.ros.node_config import NodeConfig  # noqa: E402
+from cemnet_ros.runtime.worker import BoundedWorker  # noqa: E402
 
 KITTI = SHARED / "data" / "kitti_sample"
 

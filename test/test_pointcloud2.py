@@ -189,7 +189,7 @@ def test_make_pointcloud2_rosbags_round_trip():
 @pytest.mark.parametrize("kind", ["rclpy", "rosbags"])
 def test_transformed_cloud_moves_xyz_and_keeps_every_other_byte(kind):
     from cemnet_ros.core.geometry import apply_transform
-    from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy
+    from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy
 
     # Organised, big-endian float64, an intensity field between the coordinates' and 5 bytes of row padding.
     extra = (field("intensity", 24, FLOAT32),)

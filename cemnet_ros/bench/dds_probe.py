@@ -30,8 +30,8 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
 from cemnet_ros.data.shared import REPO, SHARED
-from cemnet_ros.pipeline.node.extrinsic import pose_msg_to_matrix
 from cemnet_ros.ros.scans import HEADER_STAMP_OFFSET
+from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
 
 PROFILE = REPO / "config" / "fastdds_large_data.xml"
 KITTI = SHARED / "data" / "kitti_sample" / "velodyne"

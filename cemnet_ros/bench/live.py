@@ -1,6 +1,6 @@
 """Posed sequences played live into the node's session: what the node keeps up with at RATE x the sensor's timing.
 
-Each run is a fresh :class:`~cemnet_ros.pipeline.node.aligner_session.AlignerSession` (the node's aligner, its
+Each run is a fresh :class:`~cemnet_ros.runtime.aligner_session.AlignerSession` (the node's aligner, its
 ``behind_effort`` rule) fed through :func:`~cemnet_ros.replay.realtime.play_live`: the node's queue on a virtual
 clock, each scan taking the time its processing really takes here. Offline (rate None) every scan is aligned
 with the full budgets. What came out (the processed scans) is scored against the reference as in
@@ -18,10 +18,10 @@ import numpy as np
 from cemnet_ros.bench.real import Sequence, StepResult, sequence_metrics
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.errors import ScanRejected
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame
 from cemnet_ros.replay.realtime import live_summary, play_live
 from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import BaseFrame
 from cemnet_ros.schema import build
 
 KEPT = ("ate_m", "end_drift_pct", "off_accepted", "off_flagged", "flagged", "recovered_share", "ms_p50", "ms_p95",

@@ -3,9 +3,10 @@
 The configs import without torch (the node declares its parameters before the engine loads); the engine's
 names load torch on first use.
 """
-from .config import CEMConfig, RegistrationConfig
+from .config import CEMConfig, EngineConfig, RegistrationConfig
 
-__all__ = ["BatchRegistrationResult", "CEMConfig", "RegistrationConfig", "Registrar", "RegistrationResult", "register"]
+__all__ = ["BatchRegistrationResult", "CEMConfig", "EngineConfig", "RegistrationConfig", "Registrar",
+           "RegistrationResult", "register"]
 
 
 def __getattr__(name: str):

@@ -1,6 +1,7 @@
 """Typed configuration of the CEMNet engine, with the paper's defaults (fields documented for the schema)."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
@@ -54,14 +55,13 @@ class CEMConfig:
 
 
 @dataclass
-class RegistrationConfig:
-    """Everything :func:`cemnet_ros.core.register` needs besides the two clouds."""
+class EngineConfig:
+    """The CEM, its clouds and its network: everything :func:`cemnet_ros.core.register` needs besides the two
+    clouds and where the CEM's initial distribution comes from (a caller that decides that, as the scan
+    pipeline does, configures this alone)."""
 
     cem: CEMConfig = section(CEMConfig, "the cross-entropy method")
     n_points: int = param(768, "points per cloud fed to the network and the CEM", low=32)
-    prior: str = param("network", "where mu0/sigma0 come from: the sampling network, or N(0, prior_sigma) "
-                       "(the paper's no-network ablation)", choices=("network", "identity"))
-    prior_sigma: Six = param((1.0,) * 6, "spread of the identity prior (rad, network units)", low=0.0)
     weights: str = param("", "sampling network weights: '' = the package's (ModelNet40), 'official' = the "
                          "official clean checkpoint shipped converted, 'scan' = the package's LiDAR scan weights, or "
                          "a .npz / official .pth path")
@@ -76,14 +76,28 @@ class RegistrationConfig:
 
 
 @dataclass
+class RegistrationConfig(EngineConfig):
+    """Everything :func:`cemnet_ros.core.register` needs besides the two clouds: the engine and its prior."""
+
+    prior: str = param("network", "where mu0/sigma0 come from: the sampling network, or N(0, prior_sigma) "
+                       "(the paper's no-network ablation)", choices=("network", "identity"))
+    prior_sigma: Six = param((1.0,) * 6, "spread of the identity prior (rad, network units)", low=0.0)
+
+    @classmethod
+    def of(cls, engine: EngineConfig, prior: str) -> RegistrationConfig:
+        """``engine``'s settings with the initial distribution from ``prior`` ('network' or 'identity')."""
+        return cls(**{f.name: getattr(engine, f.name) for f in dataclasses.fields(EngineConfig)}, prior=prior)
+
+
+@dataclass
 class GlobalSearchConfig:
     """How wide the global search looks (units: radians and engine units). It has no time budget: what a scan
     yields never depends on the machine's speed."""
 
     n_scatter: int = param(2000, "candidates of the coarse scatter over yaw and translation", low=1)
-    n_prior: int = param(500, "with a prior (recovery.prior 'network'): candidates drawn from it, N(mu0, "
-                         "(prior_scale sigma0)^2), in addition to the uniform scatter", low=0)
-    prior_scale: float = param(1.0, "k: how much wider than the prior's sigma0 those are drawn", low=1e-3)
+    n_network: int = param(500, "with the network's prior (recovery.scatter 'network'): candidates drawn from it, "
+                           "N(mu0, (network_scale sigma0)^2), in addition to the uniform scatter", low=0)
+    network_scale: float = param(1.0, "k: how much wider than the network's sigma0 those are drawn", low=1e-3)
     coarse_epsilon: float = param(0.2, "epsilon of the coarse scoring (network units; the CEM refinement uses "
                                   "its own)", low=1e-4)
     tilt_sigma: float = param(0.03, "roll and pitch spread of the scatter (rad)", low=0.0)

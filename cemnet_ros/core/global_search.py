@@ -5,7 +5,7 @@ no initial guess, so a wide search survives what breaks local methods (the first
 
 1. **scatter**: candidates drawn uniformly over yaw (the full circle about the cloud's z axis), uniformly over a
    disc of translations around a centre, with small roll, pitch and height spreads (a ground robot); with a
-   prior (e.g. the sampling network's mu0, sigma0), ``n_prior`` more drawn from it, so that a good prior lets
+   prior (e.g. the sampling network's mu0, sigma0), ``n_network`` more drawn from it, so that a good prior lets
    a smaller uniform scatter suffice;
 2. **score coarsely**: each candidate's fused reward (the paper's current + after-ICP max-consensus) at a coarse
    epsilon, so that candidates in the right basin score even when they are metres off;
@@ -39,7 +39,7 @@ SCATTER_CHUNK = 500  # candidates scored at once (bounds the memory of one scori
 class SearchPrior:
     """A Gaussian over actions (6,) ``[euler z, y, x, tx, ty, tz]`` (units) that part of the scatter is drawn from.
 
-    It is used as given: the spread's widening is the search's ``prior_scale``, and the uniform scatter beside it
+    It is used as given: the spread's widening is the search's ``network_scale``, and the uniform scatter beside it
     is the exploration (the CEM's test-time blend towards the identity would halve a large yaw).
     """
 
@@ -60,13 +60,13 @@ def scatter(centre: np.ndarray, radius: float, config: GlobalSearchConfig, rng: 
             prior: Optional[SearchPrior] = None) -> np.ndarray:
     """(n_scatter, 6) actions: yaw uniform on the circle, translation uniform on a disc around ``centre`` (6,).
 
-    With a ``prior``, (n_prior + n_scatter, 6): the first ``n_prior`` from N(mu, (prior_scale * sigma)^2), the
+    With a ``prior``, (n_network + n_scatter, 6): the first ``n_network`` from N(mu, (network_scale * sigma)^2), the
     uniform ones drawn as without a prior.
     """
     uniform = _uniform(centre, radius, config.n_scatter, config, rng)
     if prior is None:
         return uniform
-    drawn = prior.mu + rng.normal(size=(config.n_prior, 6)) * (config.prior_scale * np.asarray(prior.sigma))
+    drawn = prior.mu + rng.normal(size=(config.n_network, 6)) * (config.network_scale * np.asarray(prior.sigma))
     return np.vstack([drawn, uniform])
 
 
@@ -113,7 +113,7 @@ def global_search(source: np.ndarray, target: np.ndarray, centre: np.ndarray, ra
 
     ``centre`` (6,) is the action the translation disc and yaw circle are centred on (e.g. a prediction) and
     ``radius`` the disc's radius in units; ``prior`` (absolute actions, not relative to ``centre``) adds
-    ``config.n_prior`` candidates drawn from it to the scatter.
+    ``config.n_network`` candidates drawn from it to the scatter.
     """
     config = config or GlobalSearchConfig()
     rng = np.random.default_rng(seed)

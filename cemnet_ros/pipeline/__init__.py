@@ -4,8 +4,9 @@
   judge, recover, commit); ``pair_mode`` the same steps against a target cloud; ``config`` the typed schema.
 - ``steps/``: one module per step of the recipe (:mod:`cemnet_ros.pipeline.steps` lists them).
 - ``map/``: the local voxel map that tracking registers against, and its numba kernels.
-- ``node/``: the node's plumbing as plain code (loading, queue, pairing, verdicts, diagnostics, published numbers,
-  base frame), shared by ``align_node`` and the replay.
+
+The node that drives it: :mod:`cemnet_ros.runtime` (threads, session, outputs, status; no ROS) under
+:mod:`cemnet_ros.ros` (rclpy).
 
 Import from the modules; these packages stay import-light (no torch) for the ROS layer and tests.
 """

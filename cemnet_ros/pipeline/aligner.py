@@ -15,7 +15,8 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    conditioning);
 5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit
    at the running level), on the first pair or on request: the global CEM search (yaw over the full circle,
-   metres of translation), each hypothesis polished from afar and competing with tracking's answers;
+   metres of translation), each hypothesis polished from afar and competing with tracking's answers (steps 3
+   and 5 are one routine, :mod:`.steps.track_then_recover`, that pair mode registers with too);
 6. **commit**: a good step moves the pose, the map, the motion model and the adaptive spread; a failed one is
    published flagged with the prediction and changes nothing else; a degenerate one keeps the prediction along
    the unconstrained directions, is flagged, and still extends the map; one chosen among near-ties is flagged
@@ -26,28 +27,27 @@ odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from typing import Callable, Optional
 
 import numpy as np
 
 from cemnet_ros.core import Registrar
-from cemnet_ros.core.geometry import apply_transform, se3_log
+from cemnet_ros.core.config import RegistrationConfig
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.pair_mode import PairMode
 from cemnet_ros.pipeline.steps import preprocess, refine
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
-from cemnet_ros.pipeline.steps.contest import Contest
-from cemnet_ros.pipeline.steps.covariance import flat_covariance
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
 from cemnet_ros.pipeline.steps.health import HealthMonitor
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
 from cemnet_ros.pipeline.steps.recovery import Recovery, prior_registrar
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
+from cemnet_ros.pipeline.steps.track_then_recover import RecoveryFallbacks, Registered, TrackThenRecover
 from cemnet_ros.pipeline.steps.tracking import Tracker
 from cemnet_ros.pipeline.steps.verdict import AlignmentStep, Estimate, StepJudge
 
@@ -58,20 +58,20 @@ class ScanAligner:
     def __init__(self, config: Optional[AlignerConfig] = None, registrar: Optional[Registrar] = None,
                  recovery_prior: Optional[Registrar] = None) -> None:
         """``registrar``: the tracking CEM's; ``recovery_prior``: the one whose network draws part of the recovery's
-        scatter with ``recovery.prior`` 'network' (default: one loading ``recovery.weights``); built when absent."""
+        scatter with ``recovery.scatter`` 'network' (default: one loading ``recovery.weights``); built when absent."""
         self.config = config or AlignerConfig()
-        reg_prior = "network" if self.config.tracking.prior == "network" else "identity"
-        registrar = registrar or Registrar(dataclasses.replace(self.config.registration, prior=reg_prior))
+        prior = "network" if self.config.tracking.centre == "network" else "identity"  # a given centre: no network
+        registrar = registrar or Registrar(RegistrationConfig.of(self.config.registration, prior))
         self._preprocessor = Preprocessor(self.config)
         self._checks = InputChecks(self.config.checks)
         self._motion = ConstantVelocity()
         self._spread = AdaptiveSpread(self.config.adaptive)
         self._health = HealthMonitor(self.config.health)
         judge = StepJudge(self.config, self._health)
-        self._tracker = Tracker(self.config, registrar, self._spread, judge)
-        self._recovery = Recovery(self.config, judge, prior_registrar(self.config, recovery_prior))
+        recovery = Recovery(self.config, judge, prior_registrar(self.config, recovery_prior))
+        self._registration = TrackThenRecover(Tracker(self.config, registrar, self._spread, judge), recovery)
         self._sweep = SweepDeskewer(self.config.preprocess.deskew, self._preprocessor)
-        self._pairs = PairMode(self.config, self._preprocessor, self._checks, self._tracker, self._recovery)
+        self._pairs = PairMode(self.config, self._preprocessor, self._checks, self._registration)
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
         refine.compile_kernels()
         self.reset()
@@ -104,11 +104,8 @@ class ScanAligner:
         self._spread.reset()
         self._health.reset()
         self._pose = np.eye(4) if T_odom_sensor is None else np.asarray(T_odom_sensor, dtype=np.float64).copy()
-        self._last_stamp: Optional[int] = None
-        self._period_ns: Optional[int] = None
         self._pending_recovery = ""  # why the next scan runs the global search ("" = it tracks)
         self._failures_in_a_row = 0
-        self._last_dt_ns = 0  # the motion model's last time step
         self._T_odom_last_insert: Optional[np.ndarray] = None  # where the map last grew (a recovery's fallback)
         self._sweep.reset()
         self._pairs.reset()
@@ -135,51 +132,43 @@ class ScanAligner:
         if admitted.restart:
             self.reset(self._pose)
         points, offset_ns, self._map = self._sweep.deskewed(admitted.points, admitted.times, stamp_ns,
-                                                            self._velocity, self._last_stamp, self._map)
-        before = self._last_stamp
+                                                            self._motion.velocity, self._motion.last_stamp, self._map)
         step = self._process_at(points, stamp_ns + offset_ns, start, effort)
         self._checks.passed(admitted)
-        if before is not None and self._last_stamp is not None and self._last_stamp != before:
-            self._last_dt_ns = self._last_stamp - before  # the motion model's last time step
         step.warnings, step.effort = admitted.warnings, effort
-        return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._velocity, self._motion.has_velocity)
+        return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._motion.velocity, self._motion.has_velocity)
 
     def _process_at(self, points: np.ndarray, stamp_ns: int, start: float, effort: float) -> AlignmentStep:
         """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :mod:`.steps.sweep`)."""
         frame = self._preprocessor.frame(points)
-        if self._last_stamp is not None and stamp_ns == self._last_stamp:
+        last_stamp = self._motion.last_stamp
+        if last_stamp is not None and stamp_ns == last_stamp:
             return self._held(stamp_ns, start, frame, "duplicate stamp: scan skipped")
-        if self._map is None or self._last_stamp is None or stamp_ns < self._last_stamp:
+        if self._map is None or last_stamp is None or stamp_ns < last_stamp:
             return self._start_trajectory(frame, stamp_ns, start)
-        dt_ns = stamp_ns - self._last_stamp
         T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
-        why, dt_ratio = self._pending_recovery, self._dt_ratio(dt_ns)
-        if why:
-            contest = self._tracker.contest(frame, self._map, T_predicted, dt_ratio, effort)
-        else:
-            estimate, contest = self._tracker.track(frame, self._map, T_predicted, dt_ratio, self._motion.last_pose,
-                                                    effort)
-            doubts = self._tracker.doubts(estimate, after_gap=dt_ns * 1e-9 > self.config.recovery.gap)
-            if not doubts:
-                return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, "", start, contest)
-            why = "tracking failed (" + "; ".join(doubts) + ")"
-        estimate = self._recovery.recover(frame, self._map, contest, self._T_odom_last_insert, self._pose)
-        return self._commit(frame, stamp_ns, dt_ns, T_predicted, estimate, why, start, contest)
+        registered = self._registration.register(
+            frame, self._map, T_predicted, recover_because=self._pending_recovery, T_last=self._motion.last_pose,
+            dt_ratio=self._motion.dt_ratio(stamp_ns), effort=effort,
+            after_gap=(stamp_ns - last_stamp) * 1e-9 > self.config.recovery.gap,
+            fallbacks=RecoveryFallbacks(T_fallback=self._T_odom_last_insert, T_last=self._pose))
+        return self._commit(frame, stamp_ns, T_predicted, registered, start)
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
         """The first scan (or one whose stamp went back): the map restarts from it, the pose is kept."""
-        restarted = self._last_stamp is not None
-        reason = (f"stamp went back {(self._last_stamp - stamp_ns) * 1e-9:.3f} s: restarted from this scan, "
-                  "pose kept") if self._last_stamp is not None else ""
+        last_stamp = self._motion.last_stamp
+        restarted = last_stamp is not None
+        reason = (f"stamp went back {(last_stamp - stamp_ns) * 1e-9:.3f} s: restarted from this scan, "
+                  "pose kept") if last_stamp is not None else ""
         self._preprocessor.adopt(frame)
         self._restart_map(frame, self._pose)
         self._motion.reset()
         self._motion.update(self._pose, stamp_ns)
         self._spread.reset()
-        self._last_stamp, self._period_ns = stamp_ns, None
         self._pending_recovery = "first pair"  # a single pose predicts nothing
-        return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 1.0, not restarted,
-                             time.perf_counter() - start, len(frame.sampled), reason)
+        return AlignmentStep.unregistered(stamp_ns, self._pose, accepted=not restarted, fitness=1.0,
+                                          latency_s=time.perf_counter() - start, n_points=len(frame.sampled),
+                                          reason=reason)
 
     def _restart_map(self, frame: Frame, T_odom_sensor: np.ndarray) -> None:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
@@ -192,13 +181,10 @@ class ScanAligner:
         self._pending_recovery = ""
         self._failures_in_a_row = 0
 
-    def _dt_ratio(self, dt_ns: int) -> float:
-        return 1.0 if not self._period_ns else dt_ns / self._period_ns
-
-    def _commit(self, frame: Frame, stamp_ns: int, dt_ns: int, T_predicted: np.ndarray, estimate: Estimate,
-                why_recovered: str, start: float, contest: Contest) -> AlignmentStep:
+    def _commit(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, registered: Registered,
+                start: float) -> AlignmentStep:
         """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
-        previous = self._pose
+        estimate, previous = registered.estimate, self._pose
         if estimate.failures:
             pose, reasons = T_predicted, self._failed(frame, T_predicted, estimate)
         else:
@@ -206,15 +192,11 @@ class ScanAligner:
             self._extend(frame, pose, T_predicted, estimate)
         self._pose = pose
         self._motion.update(pose, stamp_ns)
-        self._last_stamp = stamp_ns
-        # the usual time step: a running mean
-        self._period_ns = dt_ns if self._period_ns is None else int(0.9 * self._period_ns + 0.1 * dt_ns)
-        return AlignmentStep(stamp_ns, pose.copy(), np.linalg.inv(previous) @ pose,
-                             estimate.published_covariance(self.config.health.covariance_inflation),
-                             estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
-                             len(frame.sampled), "" if estimate.accepted else "; ".join(reasons),
-                             estimate.recovered, why_recovered, estimate.degenerate, estimate.signals.as_dict(),
-                             origin=estimate.published_origin, polishes=contest.polishes)
+        return AlignmentStep.registered(
+            estimate, stamp_ns=stamp_ns, pose=pose, relative=np.linalg.inv(previous) @ pose,
+            covariance_inflation=self.config.health.covariance_inflation, latency_s=time.perf_counter() - start,
+            n_points=len(frame.sampled), reason="" if estimate.accepted else "; ".join(reasons),
+            recovery_reason=registered.why_recovered, polishes=registered.contest.polishes)
 
     def _failed(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate) -> list[str]:
         """A step that cannot be vouched for: the next scan recovers; too many in a row restart the map."""
@@ -248,16 +230,11 @@ class ScanAligner:
         pose = T_odom_sensor.copy()
         return lambda: frame.gicp_cloud(voxel).placed(pose)
 
-    def _velocity(self) -> Optional[np.ndarray]:
-        """The motion model's twist (6,) per second: its last motion over its last time step (None: none yet)."""
-        if not self._motion.has_velocity or self._last_dt_ns <= 0 or self._last_stamp is None:
-            return None
-        last_motion = self._motion.predict_relative(self._last_stamp + self._last_dt_ns)  # ratio 1: as recorded
-        return se3_log(last_motion) / (self._last_dt_ns * 1e-9)
-
     def _held(self, stamp_ns: int, start: float, frame: Frame, reason: str) -> AlignmentStep:
-        return AlignmentStep(stamp_ns, self._pose.copy(), None, flat_covariance(0.0, 0.0), 0.0, False,
-                             time.perf_counter() - start, len(frame.sampled), reason)
+        """A scan not registered (e.g. a duplicate stamp): the pose held, flagged."""
+        return AlignmentStep.unregistered(stamp_ns, self._pose, accepted=False, fitness=0.0,
+                                          latency_s=time.perf_counter() - start, n_points=len(frame.sampled),
+                                          reason=reason)
 
     # -- pair mode ------------------------------------------------------------------------------------------
     def align_pair(self, source: np.ndarray, target: np.ndarray, stamp_ns: int, *, source_frame: str = "",

@@ -2,30 +2,29 @@
 file, the replay and the benchmarks.
 
 Sections by concern, named as the parameters are (``preprocess.max_range``): ``checks`` (plausibility of
-the input), ``preprocess``, ``registration``
-(the tracking CEM, :mod:`cemnet_ros.core.config`), ``tracking`` (where it searches), ``adaptive`` (how widely),
-``map``, ``polish``, ``health`` (the failure signals' limits) and ``recovery`` (the global search).
+the input), ``preprocess``, ``registration`` (the tracking CEM's engine, :mod:`cemnet_ros.core.config`; where it
+is centred is ``tracking.centre``), ``tracking`` (where it searches), ``adaptive`` (how widely), ``map``,
+``polish``, ``health`` (the failure signals' limits) and ``recovery`` (the global search).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from cemnet_ros.core.config import CEMConfig, GlobalSearchConfig, RegistrationConfig
+from cemnet_ros.core.config import CEMConfig, EngineConfig, GlobalSearchConfig
 from cemnet_ros.schema import param, section, validate
 
 SAMPLING_METHODS = ("random", "farthest")
-PRIORS = ("motion", "network", "identity")
-RECOVERY_PRIORS = ("uniform", "network")
-DERIVED = ("registration.prior",)  # set from tracking.prior: not a parameter of the pipeline
+TRACKING_CENTRES = ("motion", "network", "identity")
+RECOVERY_SCATTERS = ("uniform", "network")
 
 
-def odometry_registration() -> RegistrationConfig:
+def odometry_registration() -> EngineConfig:
     """CEM settings for tracking around a motion prediction: a short search (the recovery is the wide one).
 
     512 points and a lattice of epsilon / 2 suffice there: the polish against the map gives the precision.
     """
-    return RegistrationConfig(n_points=512, cem=CEMConfig(n_candidates=100, n_iters=2, n_fused_iters=0,
-                                                          lattice_spacing=0.5))
+    return EngineConfig(n_points=512, cem=CEMConfig(n_candidates=100, n_iters=2, n_fused_iters=0,
+                                                    lattice_spacing=0.5))
 
 
 @dataclass
@@ -118,9 +117,10 @@ class PreprocessConfig:
 class TrackingConfig:
     """Where the tracking CEM searches."""
 
-    prior: str = param("motion", "centre of the tracking CEM: the constant-velocity prediction, the sampling "
-                       "network's, or N(0, identity_sigma) around the last pose", choices=PRIORS)
-    identity_sigma: float = param(1.0, "spread of the identity prior (rad and network units; paper: N(0, I))",
+    centre: str = param("motion", "where the tracking CEM is centred: the constant-velocity prediction, the "
+                        "sampling network's mu0, or N(0, identity_sigma) around the last pose",
+                        choices=TRACKING_CENTRES)
+    identity_sigma: float = param(1.0, "spread of the 'identity' centre (rad and network units; paper: N(0, I))",
                                   low=1e-4)
     tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in fitness are a "
                              "near-tie: the one next to the prediction is kept, flagged", low=0.01, high=1.0)
@@ -177,9 +177,9 @@ class RecoveryConfig:
                                    low=0.01, high=1.0)
     restart_after: int = param(3, "consecutive failed steps after which the map restarts from the scan (lost)",
                                low=1)
-    prior: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_prior "
-                       "candidates drawn from the sampling network's raw N(mu0, sigma0)", choices=RECOVERY_PRIORS)
-    weights: str = param("scan", "that network's weights (recovery.prior 'network'): 'scan' = the package's LiDAR "
+    scatter: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_network "
+                         "candidates drawn from the sampling network's raw N(mu0, sigma0)", choices=RECOVERY_SCATTERS)
+    weights: str = param("scan", "that network's weights (recovery.scatter 'network'): 'scan' = the package's LiDAR "
                          "scan weights, '' = the package's ModelNet40 weights, 'official' = the official clean "
                          "checkpoint shipped converted, or a .npz / official .pth path")
     allow_pickle: bool = param(False, "allow loading pickled (.pth) recovery weights: only for files you trust")
@@ -194,7 +194,7 @@ class AlignerConfig:
 
     checks: InputChecksConfig = section(InputChecksConfig, "plausibility checks a scan passes first")
     preprocess: PreprocessConfig = section(PreprocessConfig, "what of a scan is used")
-    registration: RegistrationConfig = section(odometry_registration, "the tracking CEM and its network")
+    registration: EngineConfig = section(odometry_registration, "the tracking CEM and its network")
     tracking: TrackingConfig = section(TrackingConfig, "where the tracking CEM searches")
     adaptive: AdaptiveConfig = section(AdaptiveConfig, "how widely it searches (from the recent prediction errors)")
     map: MapConfig = section(MapConfig, "the local map")

@@ -1,8 +1,9 @@
 """Pair mode: the pose of each source scan in the frame of a target cloud (e.g. a latched map), no local map.
 
 The same steps as sequential mode (:mod:`.aligner`) against a map built from the target alone: check both
-clouds, track from the constant-velocity prediction of the source's pose, recover with the global search
-when there is no pose yet or tracking failed. A reused target (the same array) is prepared once.
+clouds, then register (:mod:`.steps.track_then_recover`): track from the constant-velocity prediction of the
+source's pose, recover with the global search when there is no pose yet or tracking doubts its answer. A reused
+target (the same array) is prepared once.
 """
 from __future__ import annotations
 
@@ -15,26 +16,24 @@ import numpy as np
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
-from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
+from cemnet_ros.pipeline.steps.frame import Preprocessor
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
-from cemnet_ros.pipeline.steps.recovery import Recovery
-from cemnet_ros.pipeline.steps.tracking import Tracker
-from cemnet_ros.pipeline.steps.verdict import AlignmentStep, Estimate
+from cemnet_ros.pipeline.steps.track_then_recover import TrackThenRecover
+from cemnet_ros.pipeline.steps.verdict import AlignmentStep
 
 
 class PairMode:
-    """Source-to-target alignment sharing the aligner's units, source checks, tracker and recovery."""
+    """Source-to-target alignment sharing the aligner's units, source checks and registration."""
 
     def __init__(self, config: AlignerConfig, preprocessor: Preprocessor, source_checks: InputChecks,
-                 tracker: Tracker, recovery: Recovery) -> None:
+                 registration: TrackThenRecover) -> None:
         self.config = config
         self.preprocessor = preprocessor
         self.source_checks = source_checks
         # Targets (a latched map keeps its old stamp): their own levels and frame, no stamp order.
         self.target_checks = InputChecks(dataclasses.replace(config.checks, stamp_jump=0.0))
-        self.tracker = tracker
-        self.recovery = recovery
+        self.registration = registration
         self._motion = ConstantVelocity()
         self._targets: dict[int, tuple[np.ndarray, VoxelMap]] = {}
         self.reset()
@@ -61,34 +60,23 @@ class PairMode:
         frame = self.preprocessor.frame(admitted.points)
         if self._last_stamp is not None and stamp_ns < self._last_stamp:
             self._motion.reset()
-        why, estimate = self._register(frame, target_map, stamp_ns)
         previous = self._motion.last_pose
+        T_predicted, why = (np.eye(4), "no pose yet") if previous is None else (self._motion.predict(stamp_ns), "")
+        registered = self.registration.register(frame, target_map, T_predicted, recover_because=why, T_last=previous)
+        estimate = registered.estimate
         pose = estimate.T_odom_sensor
         if not estimate.failures:
             self._motion.update(pose, stamp_ns)
         self._last_stamp = stamp_ns
         self.source_checks.passed(admitted)
-        step = AlignmentStep(stamp_ns, pose.copy(), None if previous is None else np.linalg.inv(previous) @ pose,
-                             estimate.published_covariance(self.config.health.covariance_inflation),
-                             estimate.signals.fitness, estimate.accepted, time.perf_counter() - start,
-                             len(frame.sampled), "; ".join(estimate.failures + estimate.notes), estimate.recovered,
-                             why, estimate.degenerate, estimate.signals.as_dict(),
-                             origin=estimate.published_origin)
+        step = AlignmentStep.registered(
+            estimate, stamp_ns=stamp_ns, pose=pose,
+            relative=None if previous is None else np.linalg.inv(previous) @ pose,
+            covariance_inflation=self.config.health.covariance_inflation, latency_s=time.perf_counter() - start,
+            n_points=len(frame.sampled), reason="; ".join(estimate.failures + estimate.notes),
+            recovery_reason=registered.why_recovered)
         step.warnings = admitted.warnings + target_warnings
         return step
-
-    def _register(self, frame: Frame, target_map: VoxelMap, stamp_ns: int) -> tuple[str, Estimate]:
-        """(why the global search ran, or "", the estimate): tracking from the prediction, else the search."""
-        if self._motion.last_pose is None:
-            return "no pose yet", self.recovery.recover(frame, target_map, self.tracker.contest(frame, target_map,
-                                                                                                 np.eye(4)))
-        T_predicted = self._motion.predict(stamp_ns)
-        estimate, contest = self.tracker.track(frame, target_map, T_predicted, 1.0, self._motion.last_pose)
-        doubts = self.tracker.doubts(estimate)
-        if not doubts:
-            return "", estimate
-        why = "tracking failed (" + "; ".join(doubts) + ")"
-        return why, self.recovery.recover(frame, target_map, contest)
 
     def _target_map(self, target: np.ndarray, frame_id: str, stamp_ns: int, now_ns: Optional[int]
                     ) -> tuple[VoxelMap, list]:

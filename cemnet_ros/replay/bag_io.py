@@ -1,7 +1,6 @@
 """Bag access for the offline tools, with ``rosbags`` (no rclpy/DDS): one import path for the reader
 (bag_reader.py: clouds, ground truth, skipped messages), the writer (bag_writer.py: atomic ``.mcap`` result
 bags) and what they share (bag_types.py: typestore, type names, BagError, conversions)."""
-from cemnet_ros.pipeline.node.odometry_output import UNKNOWN_VARIANCE
 from cemnet_ros.replay.bag_reader import BagInfo, BagReader, CloudFrame, SkippedMessage
 from cemnet_ros.replay.bag_types import (
     GROUND_TRUTH_TOPIC,
@@ -17,6 +16,7 @@ from cemnet_ros.replay.bag_types import (
     stamp_to_ns,
 )
 from cemnet_ros.replay.bag_writer import BagWriter
+from cemnet_ros.runtime.odometry_output import UNKNOWN_VARIANCE
 
 __all__ = [
     "BagError", "BagInfo", "BagReader", "BagWriter", "CloudFrame", "SkippedMessage", "GROUND_TRUTH_TOPIC",

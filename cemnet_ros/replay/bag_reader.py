@@ -15,7 +15,6 @@ import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
 
 from cemnet_ros.pipeline.errors import ScanRejected
-from cemnet_ros.pipeline.node.extrinsic import pose_msg_to_matrix
 from cemnet_ros.pipeline.steps.input_checks import stamp_ns
 from cemnet_ros.pointcloud2 import CloudError, CloudReport, decode_scan
 from cemnet_ros.replay.bag_types import (
@@ -27,6 +26,7 @@ from cemnet_ros.replay.bag_types import (
     BagError,
     stamp_to_ns,
 )
+from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
 
 _GT_TYPES = (POSE_STAMPED, ODOMETRY)
 

@@ -2,7 +2,7 @@
 
 Scans arrive at their stamps (relative to the first) divided by the rate; the worker takes the oldest waiting
 scan when it is free and spends on it the time its processing really takes here; a full queue drops its oldest
-waiting scan, as :class:`~cemnet_ros.pipeline.node.worker.BoundedWorker` does. The scan is handed the number of
+waiting scan, as :class:`~cemnet_ros.runtime.worker.BoundedWorker` does. The scan is handed the number of
 newer scans waiting when it starts (its backlog: the node spends less on a scan while behind). The clock is
 virtual, so the play takes only the processing time, yet every start, drop and latency is the one the node's
 queue would see on this machine.

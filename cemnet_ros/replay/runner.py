@@ -1,6 +1,6 @@
 """Run the scan pipeline (sequential mode) over a bag's clouds and write ``replay.mcap``.
 
-The scans go through the node's own session (:class:`~cemnet_ros.pipeline.node.aligner_session.AlignerSession`):
+The scans go through the node's own session (:class:`~cemnet_ros.runtime.aligner_session.AlignerSession`):
 the result bag holds what align_node (default node name) publishes per scan with the given node parameters,
 plus the input's ground truth and /tf_static copied unchanged (same topics, types, header stamps and bag times),
 in bag-time order. A cloud message that gives no pose (undecodable, truncated, too few points, rejected by the
@@ -23,9 +23,6 @@ import numpy as np
 from tqdm import tqdm
 
 from cemnet_ros.pipeline.errors import ScanRejected
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
-from cemnet_ros.pipeline.node.odometry_output import OdometryOutput, aligned_points, tf_parent_child
 from cemnet_ros.replay.bag_io import (
     ODOMETRY,
     POINTCLOUD2,
@@ -41,6 +38,9 @@ from cemnet_ros.replay.bag_io import (
 )
 from cemnet_ros.replay.realtime import LiveScan, play_live
 from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.runtime.odometry_output import OdometryOutput, aligned_points, tf_parent_child
 
 NODE_NAME = "align_node"  # the node's default name: replay.mcap carries its topics, as a live run would
 POSE_TOPIC, ODOM_TOPIC, CLOUD_TOPIC = (f"/{NODE_NAME}/{name}" for name in ("pose", "odometry", "aligned_cloud"))

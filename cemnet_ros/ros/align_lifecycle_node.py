@@ -16,13 +16,13 @@ from typing import Any, Optional
 
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
 from cemnet_ros.ros.align_node import log_parameters, new_session
 from cemnet_ros.ros.alignment import Alignment
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.ros.parameters import ConfigError, declare, read
 from cemnet_ros.ros.process import run
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic_hold import ExtrinsicHold
 
 SUCCESS, FAILURE = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
 

@@ -16,13 +16,13 @@ from typing import Any, Optional
 
 from rclpy.node import Node
 
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
-from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
 from cemnet_ros.ros.alignment import Alignment
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.ros.parameters import declare_and_read
 from cemnet_ros.ros.process import run
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.runtime.extrinsic_hold import ExtrinsicHold
 from cemnet_ros.schema import values as config_values
 
 

@@ -1,9 +1,9 @@
 """The work of an align node, wired to an rclpy node: subscriptions, the worker, outputs, services, diagnostics.
 
 The subscriptions take the messages' CDR bytes and only queue them (:mod:`.scans`, pair mode through
-:class:`~cemnet_ros.pipeline.node.pairing.PairMatcher`); one worker thread deserializes and decodes, then
-registers through :class:`~cemnet_ros.pipeline.node.aligner_session.AlignerSession` and publishes
-(:mod:`.outputs`). Every input gets a verdict (:mod:`~cemnet_ros.pipeline.node.scan_status`); a full queue drops its
+:class:`~cemnet_ros.runtime.pairing.PairMatcher`); one worker thread deserializes and decodes, then
+registers through :class:`~cemnet_ros.runtime.aligner_session.AlignerSession` and publishes
+(:mod:`.outputs`). Every input gets a verdict (:mod:`~cemnet_ros.runtime.scan_status`); a full queue drops its
 oldest message before it is deserialized, counted and reported. Services: :mod:`.services`.
 
 ``align_node`` keeps one for its whole life; ``align_lifecycle_node`` makes one on ``activate`` around the session
@@ -21,17 +21,17 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import PointCloud2
 
 from cemnet_ros.pipeline.errors import ScanRejected
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession, StepResult
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, transform_msg_to_matrix
-from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
-from cemnet_ros.pipeline.node.node_status import NodeStatus
-from cemnet_ros.pipeline.node.pairing import PairMatcher
-from cemnet_ros.pipeline.node.scan_status import Outcome, ScanStatus
-from cemnet_ros.pipeline.node.worker import BoundedWorker
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.ros.outputs import NodeOutputs
 from cemnet_ros.ros.scans import Incoming, Scan, decode
 from cemnet_ros.ros.services import NodeServices
+from cemnet_ros.runtime.aligner_session import AlignerSession, StepResult
+from cemnet_ros.runtime.extrinsic import BaseFrame, transform_msg_to_matrix
+from cemnet_ros.runtime.extrinsic_hold import ExtrinsicHold
+from cemnet_ros.runtime.node_status import NodeStatus
+from cemnet_ros.runtime.pairing import PairMatcher
+from cemnet_ros.runtime.scan_status import Outcome, ScanStatus
+from cemnet_ros.runtime.worker import BoundedWorker
 
 try:  # a full ROS install only: the sensor's extrinsic from TF
     import tf2_ros
@@ -185,7 +185,7 @@ class Alignment:
 
     def _sensor_extrinsic(self, sensor_frame: str) -> None:
         """T_base_sensor from TF until it answers once (where tf2_ros exists), else base_to_sensor; held fixed
-        from the first output on (pipeline/node/extrinsic_hold.py)."""
+        from the first output on (runtime/extrinsic_hold.py)."""
         hold = self._extrinsic
         if self.tf_buffer is None or hold.settled or not sensor_frame or sensor_frame == self._cfg.base_frame:
             return

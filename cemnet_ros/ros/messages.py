@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from cemnet_ros import pose_messages
-from cemnet_ros.pipeline.node.odometry_output import OdometryOutput
+from cemnet_ros.runtime.odometry_output import OdometryOutput
 
 
 @functools.cache

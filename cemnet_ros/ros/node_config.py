@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
+from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.schema import Parameter, build, param, parameters, params_yaml
 
 MODES = ("sequential", "pair")
@@ -59,7 +59,7 @@ class NodeConfig:
 def node_parameters() -> dict[str, Parameter]:
     """Every ROS parameter of the node: its own, then the pipeline's (dotted), by name."""
     own = parameters(NodeConfig())
-    pipeline = parameters(AlignerConfig(), exclude=DERIVED)
+    pipeline = parameters(AlignerConfig())
     clash = set(own) & set(pipeline)
     if clash:
         raise TypeError(f"node and pipeline parameters share names: {sorted(clash)}")
@@ -70,7 +70,7 @@ def configs_from_parameters(values: Mapping[str, Any]) -> tuple[NodeConfig, Alig
     """(NodeConfig, AlignerConfig) from parameter values by name; ValueError names a bad one."""
     own = set(parameters(NodeConfig()))
     node = build(NodeConfig(), {k: v for k, v in values.items() if k in own})
-    pipeline = build(AlignerConfig(), {k: v for k, v in values.items() if k not in own}, exclude=DERIVED)
+    pipeline = build(AlignerConfig(), {k: v for k, v in values.items() if k not in own})
     return node, pipeline
 
 

@@ -11,12 +11,12 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2, PointField
 
-from cemnet_ros.pipeline.node.aligner_session import StepResult
-from cemnet_ros.pipeline.node.odometry_output import aligned_points, tf_parent_child
-from cemnet_ros.pipeline.node.scan_status import ScanVerdict
 from cemnet_ros.pointcloud2 import make_pointcloud2, transformed_cloud
 from cemnet_ros.ros import messages
 from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.runtime.aligner_session import StepResult
+from cemnet_ros.runtime.odometry_output import aligned_points, tf_parent_child
+from cemnet_ros.runtime.scan_status import ScanVerdict
 
 try:  # a full ROS install, or scripts/build_tf2_msgs.sh on the pip wheels
     from tf2_msgs.msg import TFMessage
@@ -53,7 +53,7 @@ class NodeOutputs:
 
     def step(self, result: StepResult, source: Any, frame: str) -> None:
         """Pose, odometry, aligned cloud and TF of one step, in ``frame`` at the stamp of ``source`` (the decoded
-        scan: msg + points). The numbers are cemnet-replay's too (pipeline/node/odometry_output.py), and so are the
+        scan: msg + points). The numbers are cemnet-replay's too (runtime/odometry_output.py), and so are the
         fillers (cemnet_ros/pose_messages.py)."""
         cfg, out, stamp = self._cfg, result.out, source.msg.header.stamp
         head = messages.header(frame, stamp)
@@ -73,7 +73,7 @@ class NodeOutputs:
                                 source.msg.header.stamp)
 
     def scan_status(self, verdict: ScanVerdict) -> None:
-        """The verdict on one input message (pipeline/node/scan_status.py); name = its stamp in ns ("" when
+        """The verdict on one input message (runtime/scan_status.py); name = its stamp in ns ("" when
         unreadable)."""
         name = "" if verdict.stamp_ns is None else str(verdict.stamp_ns)
         self._scan_status.publish(_status(name, verdict.level, verdict.message, verdict.values))
@@ -86,7 +86,7 @@ class NodeOutputs:
                                            self._node.get_clock().now().to_msg()))
 
     def diagnostics(self, report: Any) -> None:
-        """One DiagnosticStatus from a :class:`~cemnet_ros.pipeline.node.node_status.Report`."""
+        """One DiagnosticStatus from a :class:`~cemnet_ros.runtime.node_status.Report`."""
         status = _status(f"{self._node.get_fully_qualified_name()}: alignment", report.level, report.message,
                          report.values)
         array = DiagnosticArray(status=[status])

@@ -60,17 +60,17 @@ def read(node: Node) -> tuple[NodeConfig, AlignerConfig]:
 
 def check_weights(node: Node, pipeline: AlignerConfig) -> None:
     """A weights path that does not exist is fatal where the network is used, a warning where it is not."""
-    for name, weights, user, prior in (
-            ("registration.weights", pipeline.registration.weights, "tracking.prior", pipeline.tracking.prior),
-            ("recovery.weights", pipeline.recovery.weights, "recovery.prior", pipeline.recovery.prior)):
+    for name, weights, user, choice in (
+            ("registration.weights", pipeline.registration.weights, "tracking.centre", pipeline.tracking.centre),
+            ("recovery.weights", pipeline.recovery.weights, "recovery.scatter", pipeline.recovery.scatter)):
         if weights in NAMED_WEIGHTS:
             continue
-        used = prior == "network"
+        used = choice == "network"
         if not Path(weights).is_file():
             if used:
                 raise ConfigError(f"parameter {name}: no such file {weights!r} ({user} is 'network'; '' = the "
                                   "package's weights, 'official' = the official checkpoint, 'scan' = the package's "
                                   "LiDAR scan weights)")
-            node.get_logger().warn(f"{name} {weights!r} does not exist; it is not used either ({user} is {prior!r})")
+            node.get_logger().warn(f"{name} {weights!r} does not exist; it is not used either ({user} is {choice!r})")
         elif not used:
-            node.get_logger().warn(f"{name} {weights!r} is not used: {user} is {prior!r}, not 'network'")
+            node.get_logger().warn(f"{name} {weights!r} is not used: {user} is {choice!r}, not 'network'")

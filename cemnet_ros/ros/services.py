@@ -9,8 +9,8 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic import pose_msg_to_matrix
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
 
 
 class NodeServices:

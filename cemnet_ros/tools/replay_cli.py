@@ -28,7 +28,7 @@ import yaml
 
 from cemnet_ros.io.atomic import write_report
 from cemnet_ros.io.report import Report
-from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
+from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.replay.bag_io import BagError, BagReader
 from cemnet_ros.replay.realtime import live_summary
 from cemnet_ros.replay.report import evaluate, format_report, skipped_line, speed
@@ -40,7 +40,7 @@ from cemnet_ros.tools.cli_errors import reported_errors
 
 PROG = "cemnet-replay"
 
-PIPELINE = parameters(AlignerConfig(), exclude=DERIVED)  # the flags and params-file names it accepts
+PIPELINE = parameters(AlignerConfig())  # the flags and params-file names it accepts
 # The node's own parameters that shape its outputs offline (frames, extrinsic, covariances, TF, cloud); the
 # others (topics, QoS, queue) mean nothing without DDS. Flags as for the pipeline; --config gives them too.
 NODE = {name: p for name, p in parameters(NodeConfig()).items() if name in (
@@ -149,7 +149,7 @@ def configure(args: argparse.Namespace) -> ReplayConfig:
     """The replay's configuration: --config, then the flags. A bad value is a ValueError "bad configuration: ..."."""
     try:
         params = {**load_params(args.config), **parsed_overrides(args, PIPELINE)}
-        pipeline = build(AlignerConfig(), params, exclude=DERIVED)
+        pipeline = build(AlignerConfig(), params)
         node = build(NodeConfig(), {**load_node_params(args.config), **parsed_overrides(args, NODE)})
     except (OSError, ValueError, TypeError, yaml.YAMLError) as err:
         raise ValueError(f"bad configuration: {err}") from err

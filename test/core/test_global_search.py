@@ -54,11 +54,11 @@ def test_distinct_best_suppresses_neighbours():
 def test_config_is_validated():
     with pytest.raises(ValueError):
         GlobalSearchConfig(n_scatter=2, n_hypotheses=4)
-    with pytest.raises(ValueError, match="n_prior"):
-        GlobalSearchConfig(n_prior=-1)
-    with pytest.raises(ValueError, match="prior_scale"):
-        GlobalSearchConfig(prior_scale=0.0)
-    GlobalSearchConfig(n_scatter=100, n_prior=5000)  # the prior's draws come on top of the uniform scatter
+    with pytest.raises(ValueError, match="n_network"):
+        GlobalSearchConfig(n_network=-1)
+    with pytest.raises(ValueError, match="network_scale"):
+        GlobalSearchConfig(network_scale=0.0)
+    GlobalSearchConfig(n_scatter=100, n_network=5000)  # the prior's draws come on top of the uniform scatter
 
 
 def scatter_before_the_prior(centre, radius, config, rng):
@@ -77,10 +77,10 @@ def scatter_before_the_prior(centre, radius, config, rng):
 
 def test_without_a_prior_the_scatter_and_the_search_are_unchanged(bracket):
     centre = np.array([0.2, 0.0, 0.0, 1.0, 2.0, 0.1])
-    for config in (GlobalSearchConfig(), GlobalSearchConfig(n_scatter=300, n_prior=7, prior_scale=3.0)):
+    for config in (GlobalSearchConfig(), GlobalSearchConfig(n_scatter=300, n_network=7, network_scale=3.0)):
         np.testing.assert_array_equal(scatter(centre, 0.5, config, np.random.default_rng(5)),
                                       scatter_before_the_prior(centre, 0.5, config, np.random.default_rng(5)))
-    with_prior = scatter(centre, 0.5, GlobalSearchConfig(n_prior=7), np.random.default_rng(5),
+    with_prior = scatter(centre, 0.5, GlobalSearchConfig(n_network=7), np.random.default_rng(5),
                          SearchPrior(np.ones(6), np.full(6, 0.1)))
     assert with_prior.shape == (2007, 6)  # the prior's draws first, then the same uniform scatter
     np.testing.assert_array_equal(with_prior[7:], scatter_before_the_prior(centre, 0.5, GlobalSearchConfig(),
@@ -88,8 +88,8 @@ def test_without_a_prior_the_scatter_and_the_search_are_unchanged(bracket):
     source = bracket[::2]
     target, _ = moved(source, np.radians(150.0), np.array([0.3, -0.2, 0.0]))
     plain, inert = (global_search(source, target, np.zeros(6), 0.5, GlobalSearchConfig(
-        n_scatter=1000, n_prior=n_prior, prior_scale=scale, refine=SMALL.refine), seed=3)
-        for n_prior, scale in ((500, 1.0), (20, 4.0)))
+        n_scatter=1000, n_network=n_network, network_scale=scale, refine=SMALL.refine), seed=3)
+        for n_network, scale in ((500, 1.0), (20, 4.0)))
     for a, b in zip(plain, inert):  # the prior's settings are inert without a prior: bit for bit
         np.testing.assert_array_equal(a.T_target_source, b.T_target_source)
         assert a.fitness == b.fitness and np.array_equal(a.sigma, b.sigma)
@@ -115,7 +115,7 @@ def courtyard_pair_in_units():
 @pytest.mark.parametrize("seed", [0, 3])
 def test_a_prior_at_the_true_motion_finds_what_a_tiny_scatter_misses(seed):
     source, target, truth = courtyard_pair_in_units()
-    tiny = GlobalSearchConfig(n_scatter=8, n_seeds=2, n_per_seed=0, n_hypotheses=2, n_prior=8,
+    tiny = GlobalSearchConfig(n_scatter=8, n_seeds=2, n_per_seed=0, n_hypotheses=2, n_network=8,
                               refine=CEMConfig(n_candidates=50, n_iters=3, n_fused_iters=1))
     prior = SearchPrior(matrix_to_action_np(truth), np.array([0.05, 0.02, 0.02, 0.05, 0.05, 0.01]))
     radius = 10.0 / COURTYARD_SCALE

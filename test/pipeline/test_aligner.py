@@ -8,7 +8,7 @@ import pytest
 from street_scene import make_transform, make_world, street_scan
 
 from cemnet_ros.bench.metrics import relative_error, within
-from cemnet_ros.core import CEMConfig, RegistrationConfig
+from cemnet_ros.core import CEMConfig, EngineConfig
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig, PreprocessConfig, TrackingConfig
 from cemnet_ros.pipeline.errors import ScanRejected
@@ -18,7 +18,7 @@ from cemnet_ros.pipeline.steps.preprocess import (
 )
 from cemnet_ros.pipeline.steps.tracking import Tracker
 
-FAST = AlignerConfig(registration=RegistrationConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0)))
+FAST = AlignerConfig(registration=EngineConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0)))
 WORLD = make_world()
 PERIOD = 100_000_000
 
@@ -244,7 +244,7 @@ def test_corridor_steps_are_flagged_degenerate_and_their_covariance_grows_along_
 
 def test_config_validation():
     with pytest.raises(ValueError):
-        TrackingConfig(prior="magic")
+        TrackingConfig(centre="magic")
     with pytest.raises(ValueError):
         PreprocessConfig(sampling="magic")
     with pytest.raises(ValueError):

@@ -2,6 +2,7 @@
 import numpy as np
 from street_scene import make_transform
 
+from cemnet_ros.core.geometry import se3_log
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity, se3_power
 
 
@@ -17,3 +18,20 @@ def test_constant_velocity_repeats_and_rescales_the_last_motion():
     np.testing.assert_allclose(model.predict_relative(300), step @ step, atol=1e-9)  # a dropped scan
     half = se3_power(step, 0.5)
     np.testing.assert_allclose(half @ half, step, atol=1e-9)
+
+
+def test_the_model_owns_its_time_the_last_stamp_the_usual_step_and_the_velocity():
+    model = ConstantVelocity()
+    assert model.last_stamp is None and model.period_ns is None and model.velocity() is None
+    assert model.dt_ratio(100) == 1.0  # no usual step yet
+    step = make_transform(yaw=0.1, t=(1.0, 0.2, 0.0))
+    model.update(np.eye(4), 0)
+    assert model.last_stamp == 0 and model.period_ns is None and model.velocity() is None
+    model.update(step, 100_000_000)
+    assert model.period_ns == 100_000_000 and model.dt_ratio(300_000_000) == 2.0
+    np.testing.assert_allclose(model.velocity(), se3_log(step) * 10.0, atol=1e-9)  # per second
+    model.update(step @ step, 300_000_000)  # a dropped scan: the usual step moves a tenth of the way
+    assert model.last_stamp == 300_000_000 and model.period_ns == 110_000_000
+    np.testing.assert_allclose(model.velocity(), se3_log(step) * 5.0, atol=1e-9)
+    model.reset()
+    assert model.last_stamp is None and model.period_ns is None and model.velocity() is None

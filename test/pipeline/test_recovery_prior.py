@@ -31,34 +31,34 @@ bench = _load_bench()
 
 
 def test_recovery_prior_is_validated():
-    assert RecoveryConfig().prior == "uniform" and RecoveryConfig().weights == "scan"  # used once switched on
-    with pytest.raises(ValueError, match="RecoveryConfig.prior must be one of"):
-        RecoveryConfig(prior="magic")
+    assert RecoveryConfig().scatter == "uniform" and RecoveryConfig().weights == "scan"  # used once switched on
+    with pytest.raises(ValueError, match="RecoveryConfig.scatter must be one of"):
+        RecoveryConfig(scatter="magic")
     with pytest.raises(ValueError, match="must be one of"):
-        build(AlignerConfig(), {"recovery.prior": "magic"})
-    config = build(AlignerConfig(), {"recovery.prior": "network", "recovery.weights": "official"})
-    assert config.recovery.prior == "network" and config.recovery.weights == "official"
+        build(AlignerConfig(), {"recovery.scatter": "magic"})
+    config = build(AlignerConfig(), {"recovery.scatter": "network", "recovery.weights": "official"})
+    assert config.recovery.scatter == "network" and config.recovery.weights == "official"
 
 
 def test_a_prior_registrar_exists_only_for_the_network_prior(tmp_path):
     given = object()
     assert prior_registrar(AlignerConfig()) is None
     assert prior_registrar(AlignerConfig(), given) is None  # "uniform" ignores one given
-    network = build(AlignerConfig(), {"recovery.prior": "network"})
+    network = build(AlignerConfig(), {"recovery.scatter": "network"})
     assert prior_registrar(network, given) is given
     registrar = prior_registrar(network)
     assert isinstance(registrar, Registrar) and registrar.engine.network is not None  # the package's weights
     pickled = tmp_path / "weights.pth"
     pickled.write_bytes(b"not even a pickle")
     with pytest.raises(CheckpointError):  # a .pth needs recovery.allow_pickle
-        prior_registrar(build(AlignerConfig(), {"recovery.prior": "network", "recovery.weights": str(pickled)}))
+        prior_registrar(build(AlignerConfig(), {"recovery.scatter": "network", "recovery.weights": str(pickled)}))
 
 
 def _first_pair_error(prior: str, oracle=None):
     """(m, deg) of the first pair's recovery with a tiny scatter (8 uniform candidates, 8 from the prior)."""
     first, second, motion = courtyard_pair()
-    config = build(AlignerConfig(), {"recovery.prior": prior, "recovery.search.n_scatter": 8,
-                                     "recovery.search.n_prior": 8, "recovery.search.n_seeds": 2,
+    config = build(AlignerConfig(), {"recovery.scatter": prior, "recovery.search.n_scatter": 8,
+                                     "recovery.search.n_network": 8, "recovery.search.n_seeds": 2,
                                      "recovery.search.n_per_seed": 0, "recovery.search.n_hypotheses": 2})
     aligner = ScanAligner(config, recovery_prior=oracle)
     if oracle is not None:
@@ -107,7 +107,7 @@ def test_the_benchmark_applies_issue_12s_criterion():
     lean = bench.config_for(several[-2], args)
     assert (lean.recovery.weights, lean.recovery.search.n_hypotheses) == ("scan", bench.LEAN["n_hypotheses"])
     config = bench.config_for(chosen[3], bench.parse_args(["--n-prior", "300"]))
-    assert (config.recovery.prior, config.recovery.search.n_scatter, config.recovery.search.n_prior) == (
+    assert (config.recovery.scatter, config.recovery.search.n_scatter, config.recovery.search.n_network) == (
         "network", 500, 300)
-    default_search = dataclasses.replace(config.recovery.search, n_scatter=2000, n_prior=500)
+    default_search = dataclasses.replace(config.recovery.search, n_scatter=2000, n_network=500)
     assert default_search == AlignerConfig().recovery.search  # nothing else changed

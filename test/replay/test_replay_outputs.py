@@ -54,7 +54,7 @@ def _tf_of(tf) -> np.ndarray:
 @pytest.fixture(scope="module")
 def tf_static_bag(tiny_bag, tmp_path_factory) -> Path:
     """The tiny bag plus a /tf_static base_link -> lidar (as a robot's bag has), copied message by message."""
-    from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy
+    from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy
 
     path = tmp_path_factory.mktemp("bags") / "tiny_tf_static.mcap"
     with BagReader(tiny_bag) as reader, BagWriter(path) as bag:
@@ -124,7 +124,7 @@ def test_replay_bag_is_what_align_node_publishes(live_replay, tf_static_bag):
 
 def test_replay_node_parameters_from_config_and_flags(tiny_bag, live_replay, tmp_path):
     """Frames, extrinsic, invert_tf, fixed covariances and the aligned cloud: from --config and flags, as live."""
-    from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy
+    from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy
 
     params = tmp_path / "node.yaml"
     params.write_text("/**:\n  ros__parameters:\n    odom_frame: map\n    base_frame: from_file\n"
@@ -167,10 +167,10 @@ def test_live_and_replay_fill_the_same_odometry(tmp_path):
     from rosbags.highlevel import AnyReader
     from std_msgs.msg import Header
 
-    from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
-    from cemnet_ros.pipeline.node.odometry_output import odometry_output
     from cemnet_ros.ros import messages
     from cemnet_ros.ros.node_config import NodeConfig
+    from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
+    from cemnet_ros.runtime.odometry_output import odometry_output
 
     base = BaseFrame(pose_from_xyz_rpy(EXTRINSIC))
     rel = pose_from_xyz_rpy((0.7, 0.05, 0.01, 0.01, -0.02, 0.05))

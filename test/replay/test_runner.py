@@ -11,10 +11,10 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from cemnet_ros.data import scenes
-from cemnet_ros.pipeline.node.extrinsic import pose_msg_to_matrix
 from cemnet_ros.pointcloud2 import make_pointcloud2
 from cemnet_ros.replay.bag_io import POINTCLOUD2, TYPESTORE, BagReader, SkippedMessage, ns_to_stamp, stamp_to_ns
 from cemnet_ros.replay.report import skipped_line
+from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
 from cemnet_ros.tools.replay_cli import main
 
 STAMP0, PERIOD = 1_700_000_000_000_000_000, 100_000_000

@@ -24,10 +24,10 @@ from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 from street_scene import make_transform, make_world, street_scan  # noqa: E402
 
-from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy  # noqa: E402
 from cemnet_ros.pointcloud2 import make_pointcloud2  # noqa: E402
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
 from cemnet_ros.ros.outputs import TFMessage  # noqa: E402
+from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy  # noqa: E402
 
 FAST = {"registration.cem.n_candidates": 300, "registration.cem.n_iters": 6, "qos_reliability": "reliable",
         "queue_size": 10, "publish_aligned_cloud": True}

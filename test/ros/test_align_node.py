@@ -199,7 +199,7 @@ def test_scans_sent_from_the_start_are_processed_or_reported(harness_factory):
 
 
 def test_pair_mode_with_a_latched_target(harness_factory, context):
-    h = harness_factory({"mode": "pair", "pair_tolerance": 0.0, "tracking.prior": "identity",
+    h = harness_factory({"mode": "pair", "pair_tolerance": 0.0, "tracking.centre": "identity",
                          "tracking.identity_sigma": 0.2},
                         input_topics=("source",), target_latched="target")
     target = scan_msg(0, pose=np.eye(4), frame="map")
@@ -234,7 +234,7 @@ def test_odometry_is_the_base_frames_motion_given_an_extrinsic(harness_factory):
 
     from cemnet_ros.pipeline.aligner import ScanAligner
     from cemnet_ros.pipeline.config import AlignerConfig
-    from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy
+    from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy
     from cemnet_ros.schema import build
 
     kitti = REPO / "bags" / "kitti_00_6scans.mcap"

@@ -115,7 +115,7 @@ def test_configure_activate_deactivate_cleanup(managed_factory):
 
 
 def test_a_configure_that_cannot_load_fails_and_stays_unconfigured(managed_factory):
-    managed = managed_factory({"tracking.prior": "network", "registration.weights": "/nonexistent/w.npz"})
+    managed = managed_factory({"tracking.centre": "network", "registration.weights": "/nonexistent/w.npz"})
     assert not managed.transition(Transition.TRANSITION_CONFIGURE)
     assert managed.state() == "unconfigured" and not managed.subscribed()
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from cemnet_ros import pose_messages
-from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy, pose_msg_to_matrix, transform_msg_to_matrix
-from cemnet_ros.pipeline.node.odometry_output import UNKNOWN_VARIANCE
 from cemnet_ros.replay.bag_types import TYPESTORE, rosbags_type
+from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy, pose_msg_to_matrix, transform_msg_to_matrix
+from cemnet_ros.runtime.odometry_output import UNKNOWN_VARIANCE
 
 T = pose_from_xyz_rpy((1.5, -2.0, 0.25, 0.1, -0.2, 2.5))
 COV = np.diag([1e-4, 2e-4, 3e-4, 1e-5, 2e-5, 3e-5]) + 1e-7

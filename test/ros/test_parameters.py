@@ -53,7 +53,7 @@ def test_bad_parameter_values_are_refused(context):
     (["-p", "preprocess.voxel_size:=-5.0"], "preprocess.voxel_size"),
     (["-p", "mode:=bogus"], "mode"),
     (["-p", "preprocess.max_range:=far"], "preprocess.max_range"),
-    (["-p", "tracking.prior:=network", "-p", "registration.weights:=/nonexistent/w.npz"], "no such file"),
+    (["-p", "tracking.centre:=network", "-p", "registration.weights:=/nonexistent/w.npz"], "no such file"),
 ])
 def test_fatal_configuration_is_one_line_and_exit_2(args, needle):
     import subprocess
@@ -75,7 +75,7 @@ def test_a_corrupt_weights_file_ends_the_node_with_one_line(tmp_path):
     weights.write_bytes(b"not an npz archive")
     env = {**os.environ, "ROS_DOMAIN_ID": "232"}
     run = subprocess.run([sys.executable, "-m", "cemnet_ros.ros.align_node", "--ros-args", "-p",
-                          "tracking.prior:=network", "-p", f"registration.weights:={weights}"], env=env,
+                          "tracking.centre:=network", "-p", f"registration.weights:={weights}"], env=env,
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
     assert run.stderr.strip().splitlines()[-1].startswith("align_node: error: the engine did not load"), run.stderr

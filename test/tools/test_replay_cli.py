@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cemnet_ros.pipeline.config import DERIVED, AlignerConfig
+from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
 from cemnet_ros.schema import build
@@ -127,26 +127,26 @@ def test_replay_with_no_usable_scan_exits_1(tmp_path, capsys):
 ])
 def test_replay_bad_inputs_exit_2(tiny_bag, tmp_path, capsys, argv, message):
     argv = [a.format(tmp=tmp_path, bag=tiny_bag) for a in argv]
-    (tmp_path / "bad.yaml").write_text("/**:\n  ros__parameters:\n    tracking.prior: magic\n")
+    (tmp_path / "bad.yaml").write_text("/**:\n  ros__parameters:\n    tracking.centre: magic\n")
     assert main(argv + ["--out", str(tmp_path / "o"), "--quiet"]) == 2
     assert message in capsys.readouterr().err
 
 
 def build_config(values):
-    return build(AlignerConfig(), values, exclude=DERIVED)
+    return build(AlignerConfig(), values)
 
 
 def test_config_yaml_ros_format_and_overrides(tmp_path):
     cfg_file = tmp_path / "p.yaml"
     cfg_file.write_text("/**:\n  ros__parameters:\n    registration.cem.n_candidates: 321\n    registration:\n"
-                        "      cem: {n_iters: 2}\n    preprocess.voxel_size: 0.3\n    tracking.prior: identity\n"
+                        "      cem: {n_iters: 2}\n    preprocess.voxel_size: 0.3\n    tracking.centre: identity\n"
                         "    registration.weights: ''\n    input_topic: points\n")
     config = build_config(load_params(cfg_file))
     assert config.registration.cem.n_candidates == 321 and config.registration.cem.n_iters == 2
-    assert config.preprocess.voxel_size == 0.3 and config.tracking.prior == "identity"
+    assert config.preprocess.voxel_size == 0.3 and config.tracking.centre == "identity"
     assert config.registration.weights == ""
-    with pytest.raises(ValueError, match="tracking.prior must be one of"):
-        build_config({"tracking.prior": "nonsense"})
+    with pytest.raises(ValueError, match="tracking.centre must be one of"):
+        build_config({"tracking.centre": "nonsense"})
     with pytest.raises(ValueError, match="unknown parameter"):
         build_config({"n_candidates": 5})  # flat names of the old front ends are refused, not ignored
 

@@ -1,7 +1,8 @@
 """Constant-velocity motion model on SE(3) (as KISS-ICP): the next motion repeats the last one.
 
 The last relative motion is rescaled to the new time step through the SE(3) logarithm, so a dropped scan
-(twice the usual gap) predicts twice the motion.
+(twice the usual gap) predicts twice the motion. The model also owns the time: its last stamp, the usual time
+step (a running mean) that widens the tracking's search after a longer one, and the velocity that deskews.
 """
 from __future__ import annotations
 
@@ -29,8 +30,10 @@ class ConstantVelocity:
         self.reset()
 
     def reset(self) -> None:
+        """Forget the poses, the stamps and the usual time step."""
         self._poses: list[np.ndarray] = []
         self._stamps: list[int] = []
+        self._period_ns: Optional[int] = None
 
     @property
     def has_velocity(self) -> bool:
@@ -40,10 +43,36 @@ class ConstantVelocity:
     def last_pose(self) -> Optional[np.ndarray]:
         return self._poses[-1] if self._poses else None
 
+    @property
+    def last_stamp(self) -> Optional[int]:
+        """The stamp of the last pose recorded (None before any)."""
+        return self._stamps[-1] if self._stamps else None
+
+    @property
+    def period_ns(self) -> Optional[int]:
+        """The usual time step: the running mean of the recorded ones (None before two poses)."""
+        return self._period_ns
+
     def update(self, pose: np.ndarray, stamp_ns: int) -> None:
-        """Record the pose estimated at ``stamp_ns`` (only the last two are kept)."""
+        """Record the pose estimated at ``stamp_ns`` (only the last two are kept); its time step joins the usual
+        one."""
+        if self._stamps:
+            dt_ns = int(stamp_ns) - self._stamps[-1]
+            self._period_ns = dt_ns if self._period_ns is None else int(0.9 * self._period_ns + 0.1 * dt_ns)
         self._poses = (self._poses + [np.array(pose, dtype=np.float64)])[-2:]
         self._stamps = (self._stamps + [int(stamp_ns)])[-2:]
+
+    def dt_ratio(self, stamp_ns: int) -> float:
+        """The time step to ``stamp_ns`` over the usual one (1 while none is known)."""
+        last = self.last_stamp
+        return 1.0 if not self._period_ns or last is None else (int(stamp_ns) - last) / self._period_ns
+
+    def velocity(self) -> Optional[np.ndarray]:
+        """The twist (6,) per second: the last motion over its time step (None: none yet)."""
+        last_dt_ns = self._stamps[1] - self._stamps[0] if self.has_velocity else 0
+        if last_dt_ns <= 0:
+            return None
+        return se3_log(np.linalg.inv(self._poses[0]) @ self._poses[1]) / (last_dt_ns * 1e-9)
 
     def predict_relative(self, stamp_ns: int) -> np.ndarray:
         """Predicted T_prev_curr from the last recorded pose to the pose at ``stamp_ns`` (identity at start)."""

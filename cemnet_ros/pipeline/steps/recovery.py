@@ -2,7 +2,7 @@
 
 It runs on the first pair, when tracking failed or is unconfirmed, or on request: the search
 (:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation; with
-``recovery.prior`` 'network' also candidates drawn from the sampling network's prior) returns distinct
+``recovery.scatter`` 'network' also candidates drawn from the sampling network's prior) returns distinct
 hypotheses; each one close to the best in fitness enters tracking's contest (:mod:`.contest`), polished wide.
 Without tracking's answers the guess itself (the motion prediction) and the last pose compete too: a distant
 hypothesis never replaces a near answer of similar fitness, and distinct near-ties keep a symmetric scene from
@@ -34,10 +34,10 @@ POLISH_FRACTION = 0.8  # hypotheses whose CEM fitness is this close to the best 
 
 
 def prior_registrar(config: AlignerConfig, given: Optional[Registrar] = None) -> Optional[Registrar]:
-    """The registrar whose sampling network gives the recovery's prior: None unless ``recovery.prior`` is
+    """The registrar whose sampling network gives the recovery's prior: None unless ``recovery.scatter`` is
     'network'; then ``given``, or one loading ``recovery.weights``."""
     rec = config.recovery
-    if rec.prior != "network":
+    if rec.scatter != "network":
         return None
     return given or Registrar(RegistrationConfig(prior="network", weights=rec.weights, allow_pickle=rec.allow_pickle,
                                                  n_points=rec.points, device=config.registration.device))

@@ -94,16 +94,16 @@ class Tracker:
 
     def _cem(self, frame: Frame, target: np.ndarray, T_predicted: np.ndarray, T_last: Optional[np.ndarray],
              dt_ratio: float) -> tuple[np.ndarray, float]:
-        """The CEM around the centre ``tracking.prior`` names (spread: the tracking spread, or
+        """The CEM around the centre ``tracking.centre`` names (spread: the tracking spread, or
         ``tracking.identity_sigma``) against the map sample ``target``; (T_odom_sensor, final spread m)."""
         cfg = self.config
         units = EngineUnits(frame, target.mean(axis=0))
         clouds = units.points(frame.sampled), units.points(target)
-        T_centre = {"motion": T_predicted, "identity": T_last, "network": None}[cfg.tracking.prior]
+        T_centre = {"motion": T_predicted, "identity": T_last, "network": None}[cfg.tracking.centre]
         if T_centre is None:
             result = self.registrar.register(*clouds)
         else:
-            sigma = (np.full(6, cfg.tracking.identity_sigma) if cfg.tracking.prior == "identity"
+            sigma = (np.full(6, cfg.tracking.identity_sigma) if cfg.tracking.centre == "identity"
                      else units.sigma(*self.spread.spread(dt_ratio)))
             result = self.registrar.register(*clouds, prior_pose=units.pose(T_centre), prior_sigma=sigma)
         return units.pose_in_metres(result.transform), float(np.max(np.abs(result.sigma[3:]))) * frame.scale

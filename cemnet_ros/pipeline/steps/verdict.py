@@ -49,6 +49,26 @@ class AlignmentStep:
     effort: float = 1.0  # the share of the polishes' and the search's budgets this scan had (a live node behind)
     polishes: int = 0  # answers polished and judged for this scan (the cost of its decision)
 
+    @classmethod
+    def registered(cls, estimate: Estimate, *, stamp_ns: int, pose: np.ndarray, relative: Optional[np.ndarray],
+                   covariance_inflation: float, latency_s: float, n_points: int, reason: str,
+                   recovery_reason: str, polishes: int = 0) -> AlignmentStep:
+        """A registered scan: its verdict, signals, covariance and origin from ``estimate``; ``pose`` is the one
+        published (the prediction when the step failed)."""
+        return cls(stamp_ns=stamp_ns, pose=pose.copy(), relative=relative,
+                   covariance=estimate.published_covariance(covariance_inflation), fitness=estimate.signals.fitness,
+                   accepted=estimate.accepted, latency_s=latency_s, n_points=n_points, reason=reason,
+                   recovered=estimate.recovered, recovery_reason=recovery_reason, degenerate=estimate.degenerate,
+                   signals=estimate.signals.as_dict(), origin=estimate.published_origin, polishes=polishes)
+
+    @classmethod
+    def unregistered(cls, stamp_ns: int, pose: np.ndarray, *, accepted: bool, fitness: float, latency_s: float,
+                     n_points: int, reason: str = "") -> AlignmentStep:
+        """A scan that was not registered (the first of a trajectory, a duplicate stamp): ``pose`` kept, no
+        relative motion, a zero covariance."""
+        return cls(stamp_ns=stamp_ns, pose=pose.copy(), relative=None, covariance=flat_covariance(0.0, 0.0),
+                   fitness=fitness, accepted=accepted, latency_s=latency_s, n_points=n_points, reason=reason)
+
 
 @dataclass
 class Estimate:

@@ -9,10 +9,10 @@ import pytest
 
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.node.aligner_session import AlignerSession
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, pose_from_xyz_rpy
-from cemnet_ros.pipeline.node.odometry_output import aligned_points
 from cemnet_ros.ros.node_config import NodeConfig
+from cemnet_ros.runtime.aligner_session import AlignerSession
+from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
+from cemnet_ros.runtime.odometry_output import aligned_points
 
 T_BASE_SENSOR = pose_from_xyz_rpy((0.3, 0.0, 1.2, 0.0, 0.05, 0.3))
 MOTION = pose_from_xyz_rpy((0.5, 0.02, 0.0, 0.0, 0.0, 0.04))  # the sensor's motion per scan

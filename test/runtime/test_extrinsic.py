@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, in_body_axes, pose_from_xyz_rpy
+from cemnet_ros.runtime.extrinsic import BaseFrame, in_body_axes, pose_from_xyz_rpy
 
 T_BS = pose_from_xyz_rpy((0.4, -0.2, 1.5, 0.02, -0.03, 0.7))
 

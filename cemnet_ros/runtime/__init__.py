@@ -1,4 +1,5 @@
-"""The node's plumbing around the recipe, as plain code (no ROS imports): what ``align_node`` and the replay share.
+"""The node's runtime around the scan pipeline, as plain code (no ROS imports): what ``align_node``
+(:mod:`cemnet_ros.ros`) and the replay share.
 
 ``aligner_session`` (loading the aligner in the background, service requests between scans, the map lock),
 ``worker`` (the bounded queue and its thread), ``pairing`` (pair mode's matching of sources to targets by stamp),

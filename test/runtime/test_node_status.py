@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from cemnet_ros.pipeline.node.node_status import CLOCK_GRACE_S, ERROR, OK, WARN, NodeStatus
-from cemnet_ros.pipeline.node.pairing import PairMatcher
+from cemnet_ros.runtime.node_status import CLOCK_GRACE_S, ERROR, OK, WARN, NodeStatus
+from cemnet_ros.runtime.pairing import PairMatcher
 
 
 class Clock:

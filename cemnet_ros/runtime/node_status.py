@@ -120,7 +120,7 @@ class NodeStatus:
                 "--clock', or set use_sim_time false)")
 
     def report(self, queue: Any, scale: Optional[float], publishers: int = 0, clock_unset: bool = False) -> Report:
-        """The status now; ``queue`` is the worker's :class:`~cemnet_ros.pipeline.node.worker.WorkerStats`,
+        """The status now; ``queue`` is the worker's :class:`~cemnet_ros.runtime.worker.WorkerStats`,
         ``publishers`` the number matched on the input topic, ``clock_unset`` whether the node's ROS time is
         unset (use_sim_time and no /clock yet)."""
         missing_clock = self.missing_clock(clock_unset)

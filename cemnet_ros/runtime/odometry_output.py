@@ -24,7 +24,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cemnet_ros.core.geometry import apply_transform
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame, in_body_axes
+from cemnet_ros.runtime.extrinsic import BaseFrame, in_body_axes
 
 UNKNOWN_VARIANCE = 1e6  # a twist nobody measured yet (the first scan): huge, never zero
 

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from cemnet_ros.pipeline.node.node_status import ERROR, OK, WARN, NodeStatus
-from cemnet_ros.pipeline.node.scan_status import ScanStatus
+from cemnet_ros.runtime.node_status import ERROR, OK, WARN, NodeStatus
+from cemnet_ros.runtime.scan_status import ScanStatus
 
 
 class Clock:

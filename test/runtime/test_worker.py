@@ -2,7 +2,7 @@
 import threading
 import time
 
-from cemnet_ros.pipeline.node.worker import BoundedWorker
+from cemnet_ros.runtime.worker import BoundedWorker
 
 
 def test_worker_drops_oldest_counts_and_survives_errors():

@@ -14,7 +14,7 @@ import traceback
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
-from cemnet_ros.pipeline.node.node_status import ERROR, OK, WARN, NodeStatus
+from cemnet_ros.runtime.node_status import ERROR, OK, WARN, NodeStatus
 
 WARN_PERIOD_S = 5.0  # at most one log warning per kind this often
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
-from cemnet_ros.pipeline.node.extrinsic import BaseFrame
-from cemnet_ros.pipeline.node.odometry_output import OdometryOutput, odometry_output
+from cemnet_ros.runtime.extrinsic import BaseFrame
+from cemnet_ros.runtime.odometry_output import OdometryOutput, odometry_output
 
 
 @dataclass

@@ -4,9 +4,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from cemnet_ros.pipeline.node.extrinsic import pose_from_xyz_rpy
-from cemnet_ros.pipeline.node.extrinsic_hold import ExtrinsicHold
-from cemnet_ros.pipeline.node.node_status import WARN, NodeStatus
+from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy
+from cemnet_ros.runtime.extrinsic_hold import ExtrinsicHold
+from cemnet_ros.runtime.node_status import WARN, NodeStatus
 
 PARAMETER = pose_from_xyz_rpy((0.0, 0.0, 1.0, 0.0, 0.0, 0.0))
 TF = pose_from_xyz_rpy((0.3, -0.1, 1.7, 0.01, -0.02, 0.5))
