@@ -41,5 +41,6 @@ def run(make_node: Callable[[], Any], name: str, args: Optional[list] = None) ->
 def _ignore_interrupts() -> None:
     """The first Ctrl-C ends the node; more of them (a terminal and ``ros2 launch`` both send one) must not cut
     its teardown short with a KeyboardInterrupt traceback and a killed-by-signal exit status."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # first: a Ctrl-C during what follows is dropped, not raised
     rclpy.signals.uninstall_signal_handlers()  # rclpy's handler hands each SIGINT on to Python's (KeyboardInterrupt)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # uninstalling put back the handler rclpy had found

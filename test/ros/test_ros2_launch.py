@@ -82,6 +82,7 @@ def test_the_node_gets_the_dds_profile_or_none_at_all(install_prefix, argument, 
         pid = int(next(line for line in output.lines if "process started with pid" in line).split("[")[-1][:-2])
         environment = dict(entry.split("=", 1) for entry in
                            Path(f"/proc/{pid}/environ").read_text().split("\0") if "=" in entry)
+        assert output.wait_for("engine ready", FIRST_TIMEOUT), output.text()  # a Ctrl-C, once the node runs
         interrupt(launch)
     finally:
         kill_group(launch)
