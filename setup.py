@@ -58,6 +58,7 @@ setup(
             "cemnet-replay = cemnet_ros.tools.replay_cli:main",
             "cemnet-train = cemnet_ros.tools.train_cli:main",
             "cemnet-convert-weights = cemnet_ros.tools.convert_weights_cli:main",
+            "cemnet-warm-kernels = cemnet_ros.tools.warm_kernels:main",
         ],
     },
 )

@@ -43,8 +43,8 @@ class NodeConfig:
                             "oldest is dropped", low=1, high=100)
     behind_effort: float = param(0.5, "share of the polishes' and the global search's budgets a scan gets while "
                                  "newer scans wait (1 = the same as offline)", low=0.05, high=1.0)
-    covariance_mode: str = param("registration", "'registration': from the polish's Hessian (docs/node.md); "
-                                 "'fixed': the fixed variances below", choices=COVARIANCE_MODES)
+    covariance_mode: str = param("registration", "'registration': per step, from the polish's Hessian "
+                                 "(docs/covariance.md); 'fixed': the fixed variances below", choices=COVARIANCE_MODES)
     fixed_position_variance: float = param(0.01, "covariance_mode fixed: x, y, z variance (m^2) per step",
                                            low=1e-12)
     fixed_orientation_variance: float = param(0.001, "covariance_mode fixed: roll, pitch, yaw variance (rad^2) "

@@ -10,7 +10,8 @@ own message types with the result, so a replayed bag carries exactly what the no
   ``rotvec(R(relative)) / dt``; zero while it is unknown;
 - ``pose_covariance``: 6x6, ROS order (x, y, z, roll, pitch, yaw), about the base in odom axes: the polish's
   (``covariance_mode`` registration) or the fixed variances (inflated on a flagged step);
-- ``twist_covariance``: the pose covariance in the base's axes over ``dt^2``; ``UNKNOWN_VARIANCE`` on the
+- ``twist_covariance``: the pose covariance in the axes of the twist (the previous base frame's) over ``dt^2``:
+  the spread of the twist that the pose's error gives; ``UNKNOWN_VARIANCE`` on the
   diagonal while the twist is unknown (first step, restart, no ``dt``): huge, never zero;
 - :func:`aligned_points`: the scan in odom, for the aligned cloud;
 - :func:`tf_parent_child`: the /tf transform's frames and direction.
@@ -48,8 +49,9 @@ def covariances(step: Any, base: BaseFrame, T_odom_base: np.ndarray, dt_s: Optio
 
     ``cfg``: a NodeConfig (covariance_mode, fixed_position_variance, fixed_orientation_variance);
     ``covariance_inflation``: ``health.covariance_inflation`` of the pipeline, applied to fixed variances on a
-    flagged step. The twist covariance returned here is ``in_body_axes(pose) / dt^2`` (the pose covariance
-    when there is no ``dt``); :func:`odometry_output` replaces it by the unknown one when no motion is known.
+    flagged step. The twist covariance returned here is the pose covariance in the previous base frame's axes
+    (those of the twist) over ``dt^2`` (the pose covariance when there is no ``dt``); :func:`odometry_output`
+    replaces it by the unknown one when no motion is known.
     """
     if cfg.covariance_mode == "fixed":
         pose = np.diag([cfg.fixed_position_variance] * 3 + [cfg.fixed_orientation_variance] * 3)
@@ -57,7 +59,10 @@ def covariances(step: Any, base: BaseFrame, T_odom_base: np.ndarray, dt_s: Optio
             pose = pose * covariance_inflation
     else:
         pose = base.covariance(step.covariance, step.pose)
-    twist = in_body_axes(pose, T_odom_base) / dt_s ** 2 if dt_s else pose
+    # the twist is the step's motion over dt in the previous base frame's axes (relative = inv(T_prev) T_curr)
+    relative = None if step.relative is None else base.relative(step.relative)
+    T_odom_previous = T_odom_base if relative is None else T_odom_base @ np.linalg.inv(relative)
+    twist = in_body_axes(pose, T_odom_previous) / dt_s ** 2 if dt_s else pose
     return pose, twist
 
 
