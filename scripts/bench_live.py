@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.live import bag_sequence, live_run, live_table, with_effort  # noqa: E402
+from cemnet_ros.bench.live import bag_sequence, live_run, live_table  # noqa: E402
 from cemnet_ros.bench.odometry import available_methods  # noqa: E402
 from cemnet_ros.bench.real import balm_sequence, run_method, sequence_metrics  # noqa: E402
 from cemnet_ros.bench.streams import warm_up  # noqa: E402
@@ -80,7 +80,7 @@ def main(argv: Optional[list[str]] = None) -> int:
             for rate in [None, *rates]:
                 for effort in ([1.0] if rate is None else args.behind_effort):
                     log(f"{sequence.name}: {'offline' if rate is None else f'{rate:g}x'}, behind_effort {effort:g}")
-                    row = live_run(sequence, rate, node=with_effort(NodeConfig(), effort))
+                    row = live_run(sequence, rate, node=NodeConfig(behind_effort=effort))
                     rows.append({"sequence": sequence.name, "method": f"cemnet (behind_effort {effort:g})"
                                  if rate is not None else "cemnet", "behind_effort": effort, **row})
             for name, factory in peers.items():

@@ -31,6 +31,7 @@ from cemnet_ros.bench.dds_probe import Probe, cloud_message, dds_environment, no
 from cemnet_ros.bench.live import bag_sequence, live_table  # noqa: E402
 from cemnet_ros.bench.real import Sequence, StepResult, balm_sequence, sequence_metrics  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
+from cemnet_ros.replay.realtime import latency_percentiles  # noqa: E402
 
 NS = "/live"
 WARM_UP_S = 240.0  # the engine loads and, on a first run, the kernels compile
@@ -70,14 +71,11 @@ def play(probe: Probe, sequence: Sequence, msgs: list[bytearray], rate: float) -
     accepted = {v.stamp_ns: v.level == 0 for v in probe.verdicts}
     kept = [k for k, s in enumerate(stamps) if s in probe.poses]
     latencies = [1e3 * (arrivals[stamps[k]] - published[stamps[k]]) for k in kept]
-    played = Sequence(sequence.name, [sequence.scans[k] for k in kept], [sequence.poses[k] for k in kept],
-                      [sequence.stamps_ns[k] for k in kept], sequence.max_range)
     results = [StepResult(probe.poses[stamps[k]], accepted.get(stamps[k], False), False, np.nan, "") for k in kept]
-    metrics = sequence_metrics(played, results) if kept else {}
+    metrics = sequence_metrics(sequence.subset(kept), results) if kept else {}
+    accuracy = {k: metrics.get(k) for k in ("ate_m", "end_drift_pct", "off_accepted", "off_flagged")}
     return {"rate": rate, "scans": len(msgs), "processed": len(kept), "behind": None,
-            **{f"latency_ms_p{q}": float(np.percentile(latencies, q)) if latencies else None for q in (50, 95, 99)},
-            "ms_p50": None, "ms_p95": None, **{k: metrics.get(k) for k in ("ate_m", "end_drift_pct", "off_accepted",
-                                                                             "off_flagged")}}
+            **latency_percentiles(latencies), "ms_p50": None, "ms_p95": None, **accuracy}
 
 
 def main(argv: Optional[list[str]] = None) -> int:

@@ -8,7 +8,6 @@ with the full budgets. What came out (the processed scans) is scored against the
 """
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Mapping, Optional
@@ -56,9 +55,7 @@ def live_run(sequence: Sequence, rate: Optional[float], overrides: Optional[Mapp
     else:
         live = live_summary(play_live(indices, lambda k: sequence.stamps_ns[k], rate, node.queue_size, handle))
     kept = sorted(results)
-    played = Sequence(sequence.name, [sequence.scans[k] for k in kept], [sequence.poses[k] for k in kept],
-                      [sequence.stamps_ns[k] for k in kept], sequence.max_range)
-    metrics = sequence_metrics(played, [results[k] for k in kept])
+    metrics = sequence_metrics(sequence.subset(kept), [results[k] for k in kept])
     return {"rate": rate, **live, **{k: metrics[k] for k in KEPT}, "off_steps": metrics["off_steps"]}
 
 
@@ -74,11 +71,6 @@ def bag_sequence(path: Path) -> Sequence:
     nearest = [int(np.argmin(np.abs(gt_stamps - f.stamp_ns))) for f in frames]
     return Sequence(Path(path).name.split(".")[0], [f.points for f in frames], [gt_poses[i] for i in nearest],
                     [f.stamp_ns for f in frames], max_range=100.0)
-
-
-def with_effort(node: NodeConfig, behind_effort: float) -> NodeConfig:
-    """``node`` with another ``behind_effort`` (1 = no lighter steps while behind)."""
-    return dataclasses.replace(node, behind_effort=behind_effort)
 
 
 def live_table(rows: list[dict[str, Any]]) -> str:

@@ -54,6 +54,11 @@ class Sequence:
         return Sequence(f"{self.name}_keyframes_{stride}x_{points}pts", thinned, self.poses[::stride],
                         self.stamps_ns[::stride], self.max_range)
 
+    def subset(self, indices: list[int]) -> "Sequence":
+        """The scans at ``indices`` (in order), e.g. those a live node processed."""
+        return Sequence(self.name, [self.scans[k] for k in indices], [self.poses[k] for k in indices],
+                        [self.stamps_ns[k] for k in indices], self.max_range)
+
     @property
     def length_m(self) -> float:
         """Distance travelled along the true trajectory."""

@@ -75,5 +75,10 @@ def live_summary(scans: list[LiveScan]) -> dict[str, Any]:
     processed = len(latencies)
     return {"scans": len(scans), "processed": processed, "dropped": len(scans) - processed,
             "processed_share": processed / len(scans) if scans else 0.0,
-            "behind": sum(s.backlog > 0 for s in scans if not s.dropped),
-            **{f"latency_ms_p{q}": float(np.percentile(latencies, q)) if latencies else None for q in (50, 95, 99)}}
+            "behind": sum(s.backlog > 0 for s in scans if not s.dropped), **latency_percentiles(latencies)}
+
+
+def latency_percentiles(latencies_ms: list[float]) -> dict[str, Optional[float]]:
+    """``latency_ms_p50``, ``_p95``, ``_p99`` of ``latencies_ms`` (None when there are none)."""
+    return {f"latency_ms_p{q}": float(np.percentile(latencies_ms, q)) if latencies_ms else None
+            for q in (50, 95, 99)}

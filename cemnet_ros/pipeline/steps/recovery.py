@@ -87,9 +87,10 @@ class Recovery:
         # The map holds at most a few points per map voxel: the scan, thinned alike, is sampled at the same density.
         uniform = voxel_downsample(frame.near, target_map.voxel_size)
         source = units.points(apply_transform(T_guess, subsample(uniform, rec.points, "random", seed)))
-        hypotheses = global_search(source, units.points(target), np.zeros(6), rec.radius / frame.scale,
+        target = units.points(target)
+        hypotheses = global_search(source, target, np.zeros(6), rec.radius / frame.scale,
                                    lean_search(rec.search, contest.polisher.effort),
-                                   seed=seed, prior=self._network_prior(source, units.points(target)))
+                                   seed=seed, prior=self._network_prior(source, target))
         contest.escalate(rec.radius)
         if not contest.answers:
             contest.enter(T_guess, Origin.PREDICTION, wide=True)
