@@ -6,6 +6,7 @@ import pytest
 
 from cemnet_ros.bench.covariance_runs import evaluate, nees_table
 from cemnet_ros.bench.live import bag_sequence
+from cemnet_ros.ros.node_config import NodeConfig
 
 BAG = Path(__file__).resolve().parents[2] / "bags" / "synthetic_lidar.mcap"
 
@@ -19,5 +20,7 @@ def test_both_modes_are_measured_on_the_same_trajectory():
     # one trajectory: the modes differ in their covariances only, so the odometry's ATE is the same
     assert registration["ate_odometry_m"] == fixed["ate_odometry_m"] < 0.05
     steps = [s for s in result["steps"] if "error" in s]
-    assert all(np.all(np.asarray(s["std_fixed"]) == np.sqrt([0.01] * 3 + [0.001] * 3)) for s in steps if s["accepted"])
+    node = NodeConfig()
+    fixed_std = np.sqrt([node.fixed_position_variance] * 3 + [node.fixed_orientation_variance] * 3)
+    assert all(np.all(np.asarray(s["std_fixed"]) == fixed_std) for s in steps if s["accepted"])
     assert "| synthetic_lidar | registration | 4 |" in nees_table({"synthetic_lidar": result})
