@@ -1,4 +1,5 @@
 """The covariance benchmark end to end on the bundled synthetic bag (exact ground truth): both modes, one run."""
+import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,25 @@ from cemnet_ros.bench.covariance_runs import evaluate, nees_table
 from cemnet_ros.bench.live import bag_sequence
 from cemnet_ros.ros.node_config import NodeConfig
 
-BAG = Path(__file__).resolve().parents[2] / "bags" / "synthetic_lidar.mcap"
+REPO = Path(__file__).resolve().parents[2]
+BAG = REPO / "bags" / "synthetic_lidar.mcap"
+
+
+def _load_script():
+    """scripts/bench_covariance.py as a module (the scripts are not a package)."""
+    spec = importlib.util.spec_from_file_location("bench_covariance", REPO / "scripts" / "bench_covariance.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_bench_takes_several_bags_or_none():
+    script = _load_script()
+    assert script.parse_args(["--bag", "a.mcap", "b.mcap"]).bag == [Path("a.mcap"), Path("b.mcap")]
+    assert script.parse_args([]).bag == [script.KITTI_BAG]
+    assert script.parse_args(["--bag", "none", "--balm", "dir"]).bag == []
+    with pytest.raises(SystemExit):
+        script.parse_args(["--bag", "none"])  # no sequence at all
 
 
 @pytest.mark.slow
