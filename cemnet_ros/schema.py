@@ -182,7 +182,14 @@ def _yaml_value(value: Any) -> str:
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(value, tuple):
         return "[" + ", ".join(_yaml_value(float(v)) for v in value) + "]"
-    return repr(float(value)) if isinstance(value, float) else str(value)
+    return _yaml_float(value) if isinstance(value, float) else str(value)
+
+
+def _yaml_float(value: float) -> str:
+    """``value`` as YAML 1.1 reads a float: its exponent form needs a dot (``5e-07`` would be a string)."""
+    text = repr(float(value))
+    mantissa, e, exponent = text.partition("e")
+    return text if not e or "." in mantissa else f"{mantissa}.0e{exponent}"
 
 
 def add_arguments(parser: argparse.ArgumentParser, params: Mapping[str, Parameter], title: str) -> None:

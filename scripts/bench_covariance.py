@@ -7,9 +7,11 @@ blocks, expected 3 each), and the ATE of the odometry before and after a pose gr
 first-to-last motion (``cemnet_ros/bench/covariance_runs.py``). Sequences (the script downloads nothing):
 
 * ``--balm DIR``: BALM's ``datas/benchmark_realworld`` (hku-mars/BALM, its licence: keep it out of this repo);
-* ``--bag PATH``: a bag with ground truth (default ``bags/kitti_00_6scans.mcap``; ``--bag none`` skips it).
+* ``--bag PATH [PATH ...]``: bags with ground truth (default ``bags/kitti_00_6scans.mcap``; ``--bag none``: no
+  bag).
 
     python scripts/bench_covariance.py --balm ~/BALM/datas/benchmark_realworld --out results/bench_covariance.json
+    python scripts/bench_covariance.py --bag bags/synthetic_lidar.mcap bags/rgbd_7scenes_50.mcap
 """
 from __future__ import annotations
 
@@ -35,21 +37,21 @@ KITTI_BAG = REPO / "bags" / "kitti_00_6scans.mcap"
 def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--balm", type=Path, help="BALM's datas/benchmark_realworld folder")
-    parser.add_argument("--bag", default=str(KITTI_BAG), help="a bag with ground truth ('none': no bag)")
+    parser.add_argument("--bag", nargs="+", default=[str(KITTI_BAG)], help="bags with ground truth ('none': no bag)")
     parser.add_argument("--limit", type=int, help="first N scans of each sequence only")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_covariance.json")
     args = parser.parse_args(argv)
-    args.bag = None if args.bag == "none" else Path(args.bag)
-    if (args.balm, args.bag) == (None, None):
+    args.bag = [] if args.bag == ["none"] else [Path(bag) for bag in args.bag]
+    if args.balm is None and not args.bag:
         parser.error("no sequence: give --balm DIR and/or --bag PATH")
     return args
 
 
 def sequences(args: argparse.Namespace) -> list[Sequence]:
-    """The bag's scans (the first ``--limit``) and BALM's, as asked."""
-    bag = [] if args.bag is None else [bag_sequence(args.bag)]
+    """The bags' scans (the first ``--limit``) and BALM's, as asked."""
+    bags = [bag_sequence(path) for path in args.bag]
     balm = [] if args.balm is None else [balm_sequence(args.balm, args.limit)]
-    return [s.first(args.limit) if args.limit else s for s in bag] + balm
+    return [s.first(args.limit) if args.limit else s for s in bags] + balm
 
 
 def main(argv: Optional[list[str]] = None) -> int:

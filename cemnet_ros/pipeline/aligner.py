@@ -20,7 +20,8 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
 6. **commit**: a good step moves the pose, the map, the motion model and the adaptive spread; a failed one is
    published flagged with the prediction and changes nothing else; a degenerate one keeps the prediction along
    the unconstrained directions, is flagged, and still extends the map; one chosen among near-ties is flagged
-   and moves the pose only.
+   and moves the pose only. The step's covariance is its registration's plus the previous pose's error against
+   the map (:func:`~.steps.covariance.carried_into_step`).
 
 Pair mode (:mod:`.pair_mode`) runs steps 0-5 against a map of the target cloud. Poses are ``T_odom_sensor``;
 odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.
@@ -41,6 +42,7 @@ from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.pair_mode import PairMode
 from cemnet_ros.pipeline.steps import preprocess, refine
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.steps.covariance import carried_into_step
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
 from cemnet_ros.pipeline.steps.health import HealthMonitor
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
@@ -107,6 +109,7 @@ class ScanAligner:
         self._pending_recovery = ""  # why the next scan runs the global search ("" = it tracks)
         self._failures_in_a_row = 0
         self._T_odom_last_insert: Optional[np.ndarray] = None  # where the map last grew (a recovery's fallback)
+        self._pose_vs_map = np.zeros((6, 6))  # covariance of the pose's error against the map (ROS order)
         self._sweep.reset()
         self._pairs.reset()
         self._checks.forget_frame()
@@ -176,6 +179,7 @@ class ScanAligner:
         self._map.update(apply_transform(T_odom_sensor, frame.dense), T_odom_sensor[:3, 3],
                          self._scan_cloud(frame, self._map.gicp_voxel, T_odom_sensor))
         self._T_odom_last_insert = T_odom_sensor.copy()
+        self._pose_vs_map = np.zeros((6, 6))  # the map is this scan where it is: no error against it
         self._sweep.map_restarted(T_odom_sensor)
         self._health.reset()
         self._pending_recovery = ""
@@ -185,6 +189,7 @@ class ScanAligner:
                 start: float) -> AlignmentStep:
         """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
         estimate, previous = registered.estimate, self._pose
+        carried = self._carried(estimate, T_predicted)
         if estimate.failures:
             pose, reasons = T_predicted, self._failed(frame, T_predicted, estimate)
         else:
@@ -196,7 +201,15 @@ class ScanAligner:
             estimate, stamp_ns=stamp_ns, pose=pose, relative=np.linalg.inv(previous) @ pose,
             covariance_inflation=self.config.health.covariance_inflation, latency_s=time.perf_counter() - start,
             n_points=len(frame.sampled), reason="" if estimate.accepted else "; ".join(reasons),
-            recovery_reason=registered.why_recovered, polishes=registered.contest.polishes)
+            recovery_reason=registered.why_recovered, polishes=registered.contest.polishes, carried=carried)
+
+    def _carried(self, estimate: Estimate, T_predicted: np.ndarray) -> np.ndarray:
+        """What the previous pose's error against the map adds to this step's covariance; the pose published now
+        errs against the map by this registration's own error (inflated when it failed) from here on."""
+        pose = T_predicted if estimate.failures else estimate.T_odom_sensor
+        carried = carried_into_step(self._pose_vs_map, self._pose, pose)
+        self._pose_vs_map = estimate.published_covariance(self.config.health.covariance_inflation)
+        return carried
 
     def _failed(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate) -> list[str]:
         """A step that cannot be vouched for: the next scan recovers; too many in a row restart the map."""

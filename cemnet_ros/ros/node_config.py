@@ -45,10 +45,10 @@ class NodeConfig:
                                  "newer scans wait (1 = the same as offline)", low=0.05, high=1.0)
     covariance_mode: str = param("registration", "'registration': per step, from the polish's Hessian "
                                  "(docs/covariance.md); 'fixed': the fixed variances below", choices=COVARIANCE_MODES)
-    fixed_position_variance: float = param(0.01, "covariance_mode fixed: x, y, z variance (m^2) per step",
-                                           low=1e-12)
-    fixed_orientation_variance: float = param(0.001, "covariance_mode fixed: roll, pitch, yaw variance (rad^2) "
-                                              "per step", low=1e-12)
+    fixed_position_variance: float = param(2.5e-5, "covariance_mode fixed: x, y, z variance (m^2) per step (5 mm: "
+                                           "measure your sensor's, docs/covariance.md)", low=1e-12)
+    fixed_orientation_variance: float = param(5e-7, "covariance_mode fixed: roll, pitch, yaw variance (rad^2) per "
+                                              "step (0.7 mrad: measure your sensor's, docs/covariance.md)", low=1e-12)
     publish_aligned_cloud: bool = param(False, "publish each scan in odom_frame on ~/aligned_cloud (all fields)")
     aligned_cloud_voxel: float = param(0.0, "voxel grid (m) of ~/aligned_cloud; 0 = full resolution", low=0.0)
     local_map_period: float = param(1.0, "seconds between ~/local_map publications; 0 = never", low=0.0)

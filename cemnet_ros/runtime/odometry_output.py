@@ -8,8 +8,9 @@ own message types with the result, so a replayed bag carries exactly what the no
   or after a map restart);
 - ``linear``, ``angular``: the twist in the base frame (REP-105): ``t(relative) / dt`` and
   ``rotvec(R(relative)) / dt``; zero while it is unknown;
-- ``pose_covariance``: 6x6, ROS order (x, y, z, roll, pitch, yaw), about the base in odom axes: the polish's
-  (``covariance_mode`` registration) or the fixed variances (inflated on a flagged step);
+- ``pose_covariance``: 6x6, ROS order (x, y, z, roll, pitch, yaw), about the base in odom axes: the step's from
+  the polishes (``covariance_mode`` registration: this scan's and the previous one's, docs/covariance.md) or the
+  fixed variances (inflated on a flagged step);
 - ``twist_covariance``: the pose covariance in the axes of the twist (the previous base frame's) over ``dt^2``:
   the spread of the twist that the pose's error gives; ``UNKNOWN_VARIANCE`` on the
   diagonal while the twist is unknown (first step, restart, no ``dt``): huge, never zero;

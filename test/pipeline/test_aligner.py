@@ -13,9 +13,11 @@ from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig, PreprocessConfig, TrackingConfig
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.steps.contest import Contest
+from cemnet_ros.pipeline.steps.covariance import moved_by
 from cemnet_ros.pipeline.steps.preprocess import (
     robust_radius,
 )
+from cemnet_ros.pipeline.steps.track_then_recover import TrackThenRecover
 from cemnet_ros.pipeline.steps.tracking import Tracker
 
 FAST = AlignerConfig(registration=EngineConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0)))
@@ -114,6 +116,28 @@ def test_without_local_first_the_cem_samples_on_every_tracked_step(monkeypatch):
     steps, events = sampled_and_competed(monkeypatch, ScanAligner(config), poses)
     assert all(s.accepted for s in steps) and all(e[:1] == ("cem",) for e in events[2:])
     assert all(s.origin == "cem" for s in steps[2:])
+
+
+def test_a_step_covariance_is_its_registration_plus_the_previous_pose_error_against_the_map(monkeypatch):
+    """The map holds the earlier scans where they were registered: a step's motion errs by this registration's
+    error and the previous pose's (moved to the current position); the first step's previous pose is the map."""
+    registrations = []
+    register = TrackThenRecover.register
+
+    def recorded(self, *args, **kwargs):
+        registered = register(self, *args, **kwargs)
+        registrations.append(registered.estimate)
+        return registered
+
+    monkeypatch.setattr(TrackThenRecover, "register", recorded)
+    poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(4)]
+    steps = drive(ScanAligner(FAST), poses)
+    assert all(s.accepted for s in steps), [s.reason for s in steps]
+    own = [None] + [r.covariance for r in registrations]  # the first scan starts the map: no registration
+    np.testing.assert_allclose(steps[1].covariance, own[1])
+    for k in range(2, len(steps)):
+        lever = steps[k].pose[:3, 3] - steps[k - 1].pose[:3, 3]
+        np.testing.assert_allclose(steps[k].covariance, own[k] + moved_by(own[k - 1], lever), rtol=1e-9)
 
 
 def test_a_scan_of_another_place_is_flagged_and_the_prediction_published():

@@ -3,14 +3,17 @@ import numpy as np
 import pytest
 from street_scene import make_transform
 
+from cemnet_ros.core.geometry import so3_exp, so3_log
 from cemnet_ros.pipeline.config import AdaptiveConfig, HealthConfig
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.covariance import (
     MIN_STD_ROTATION,
     Conditioning,
+    carried_into_step,
     covariance_from_hessian,
     flat_covariance,
     keep_prediction_along,
+    moved_by,
 )
 from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals
 
@@ -126,3 +129,41 @@ def test_keep_prediction_along_replaces_only_the_free_direction():
 def test_flat_covariance_is_floored():
     cov = flat_covariance(0.0, 0.0)
     assert np.linalg.matrix_rank(cov) == 6 and np.all(np.diag(cov) > 0)
+
+
+def perturbed(T_odom_sensor: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """``T_odom_sensor`` with a ROS-order error [v, w]: R <- exp([w]x) R, t <- t + v."""
+    out = T_odom_sensor.copy()
+    out[:3, :3] = so3_exp(error[3:]) @ T_odom_sensor[:3, :3]
+    out[:3, 3] += error[:3]
+    return out
+
+
+def test_a_pose_error_moved_by_the_step_is_the_error_it_makes_at_the_next_pose():
+    """Errors drawn at the previous pose, carried through the step's motion: their spread at the current pose
+    (the same parameterisation: rotation about the current position) is :func:`moved_by` the step's lever."""
+    rng = np.random.default_rng(4)
+    T_odom_previous, T_previous_current = make_transform(yaw=0.4, t=(1.0, 2.0, 0.5)), make_transform(
+        yaw=0.1, t=(3.0, -1.0, 0.2))
+    T_odom_current = T_odom_previous @ T_previous_current
+    covariance = np.diag([1e-6, 4e-6, 1e-6, 1e-6, 4e-6, 9e-6])
+    errors = []
+    for e in rng.multivariate_normal(np.zeros(6), covariance, size=4000):
+        moved = perturbed(T_odom_previous, e) @ T_previous_current
+        errors.append(np.r_[moved[:3, 3] - T_odom_current[:3, 3],
+                            so3_log(moved[:3, :3] @ T_odom_current[:3, :3].T)])
+    lever = T_odom_current[:3, 3] - T_odom_previous[:3, 3]
+    expected = moved_by(covariance, lever)
+    np.testing.assert_allclose(np.cov(np.array(errors).T), expected, atol=0.1 * np.max(np.diag(expected)))
+    assert expected[1, 1] > 2 * covariance[1, 1]  # the yaw error moved the current position sideways
+
+
+def test_a_step_carries_the_previous_pose_error_against_the_map():
+    """The step's covariance adds the previous pose's error (moved to the current position) to the
+    registration's; a previous pose the map was started from adds nothing."""
+    T_odom_previous, T_odom_current = np.eye(4), make_transform(t=(2.0, 0.0, 0.0))
+    assert not carried_into_step(np.zeros((6, 6)), T_odom_previous, T_odom_current).any()
+    yaw_only = np.diag([0.0, 0.0, 0.0, 0.0, 0.0, 1e-6])  # 1 mrad of yaw, 2 m behind: 2 mm sideways
+    carried = carried_into_step(yaw_only, T_odom_previous, T_odom_current)
+    np.testing.assert_allclose(np.diag(carried), [0.0, 4e-6, 0.0, 0.0, 0.0, 1e-6])
+    assert carried[1, 5] == pytest.approx(2e-6)  # sideways error and yaw error go together

@@ -12,6 +12,7 @@ import pytest
 
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
 from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
+from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.tools.replay_cli import main
 
 SMALL_CEM = ["--registration.cem.n_candidates", "200", "--registration.cem.n_iters", "4"]
@@ -148,7 +149,8 @@ def test_replay_node_parameters_from_config_and_flags(tiny_bag, live_replay, tmp
         (tf,) = tf_msg.transforms  # invert_tf: robot -> map
         assert (tf.header.frame_id, tf.child_frame_id) == ("robot", "map")
         np.testing.assert_allclose(_tf_of(tf), np.linalg.inv(T), atol=1e-9)
-        np.testing.assert_allclose(np.reshape(o.pose.covariance, (6, 6)), np.diag([0.04] * 3 + [0.001] * 3))
+        np.testing.assert_allclose(np.reshape(o.pose.covariance, (6, 6)),
+                                   np.diag([0.04] * 3 + [NodeConfig().fixed_orientation_variance] * 3))
         assert cloud.header.frame_id == "map" and 0 < cloud.width < 16 * 360  # the 0.5 m voxel grid
     # TUM file and ATE are the base frame's (what is published).
     summary = json.loads((out / "summary.json").read_text())
@@ -168,7 +170,6 @@ def test_live_and_replay_fill_the_same_odometry(tmp_path):
     from std_msgs.msg import Header
 
     from cemnet_ros.ros import messages
-    from cemnet_ros.ros.node_config import NodeConfig
     from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
     from cemnet_ros.runtime.odometry_output import odometry_output
 

@@ -6,6 +6,10 @@ sigma^2 the residual variance. Along a direction the scene does not constrain (a
 eigenvalue is near zero: the pipeline keeps the motion prediction there and the covariance reports the
 prediction's uncertainty instead, so it grows along the corridor. ROS orders covariance x, y, z, roll, pitch,
 yaw: [v, w] here (rotation-vector components about the map axes, which are roll, pitch, yaw for small angles).
+
+A step's covariance (this registration's plus :func:`carried_into_step`) is that of its motion, not of one
+registration: the map holds the earlier scans where they were registered, so the previous pose errs against the
+map by its own registration's error, and the motion between the two poses carries both.
 """
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cemnet_ros.core.geometry import so3_exp, so3_log
+from cemnet_ros.core.geometry import hat, so3_exp, so3_log
 
 MIN_STD_TRANSLATION = 1e-3  # metres: the floor keeps the matrix positive definite for SLAM back ends
 MIN_STD_ROTATION = 1e-3  # radians
@@ -75,3 +79,20 @@ def flat_covariance(std_translation: float, std_rotation: float, *, inflate: flo
     """Diagonal ROS covariance (e.g. a step without a polish, or the first scan)."""
     std = np.r_[np.full(3, max(std_translation, MIN_STD_TRANSLATION)), np.full(3, max(std_rotation, MIN_STD_ROTATION))]
     return np.diag(std ** 2) * float(inflate)
+
+
+def moved_by(covariance: np.ndarray, lever_odom: np.ndarray) -> np.ndarray:
+    """A ROS-order pose covariance (rotations about the pose's position) as the error it makes at a position
+    ``lever_odom`` (m, odom axes) away: a rotation error w moves that position by w x lever."""
+    jacobian = np.eye(6)
+    jacobian[:3, 3:] = -hat(lever_odom)
+    return jacobian @ covariance @ jacobian.T
+
+
+def carried_into_step(previous_vs_map: np.ndarray, T_odom_previous: np.ndarray, T_odom_current: np.ndarray
+                      ) -> np.ndarray:
+    """What the previous pose's error adds to the covariance of the step from ``T_odom_previous`` to
+    ``T_odom_current`` (ROS order, about the current position): ``previous_vs_map``, the previous pose's error
+    against the map (its own registration's, independent of this one; zero where the map was started from it),
+    moved to the current position. The step's covariance is this registration's plus it."""
+    return moved_by(previous_vs_map, T_odom_current[:3, 3] - T_odom_previous[:3, 3])

@@ -52,11 +52,13 @@ class AlignmentStep:
     @classmethod
     def registered(cls, estimate: Estimate, *, stamp_ns: int, pose: np.ndarray, relative: Optional[np.ndarray],
                    covariance_inflation: float, latency_s: float, n_points: int, reason: str,
-                   recovery_reason: str, polishes: int = 0) -> AlignmentStep:
+                   recovery_reason: str, polishes: int = 0, carried: Optional[np.ndarray] = None) -> AlignmentStep:
         """A registered scan: its verdict, signals, covariance and origin from ``estimate``; ``pose`` is the one
-        published (the prediction when the step failed)."""
+        published (the prediction when the step failed); ``carried``: what the previous pose's error adds to the
+        step's covariance (:func:`~.covariance.carried_into_step`; none in pair mode)."""
         return cls(stamp_ns=stamp_ns, pose=pose.copy(), relative=relative,
-                   covariance=estimate.published_covariance(covariance_inflation), fitness=estimate.signals.fitness,
+                   covariance=estimate.published_covariance(covariance_inflation, carried),
+                   fitness=estimate.signals.fitness,
                    accepted=estimate.accepted, latency_s=latency_s, n_points=n_points, reason=reason,
                    recovered=estimate.recovered, recovery_reason=recovery_reason, degenerate=estimate.degenerate,
                    signals=estimate.signals.as_dict(), origin=estimate.published_origin, polishes=polishes)
@@ -101,9 +103,11 @@ class Estimate:
         """A step the node vouches for: no failure and nothing to flag."""
         return not self.failures and not self.degenerate
 
-    def published_covariance(self, inflation: float) -> np.ndarray:
-        """The covariance as published: inflated when the step failed."""
-        return self.covariance * inflation if self.failures else self.covariance
+    def published_covariance(self, inflation: float, carried: Optional[np.ndarray] = None) -> np.ndarray:
+        """The covariance as published: this registration's plus ``carried`` (what the previous pose's error adds
+        to the step, :func:`~.covariance.carried_into_step`), inflated when the step failed."""
+        covariance = self.covariance if carried is None else self.covariance + carried
+        return covariance * inflation if self.failures else covariance
 
     @property
     def published_origin(self) -> str:
