@@ -74,8 +74,9 @@ class AdaptiveConfig:
 class HealthConfig:
     """Limits of the failure signals (fractions, metres, radians)."""
 
-    min_fitness: float = param(0.3, "inlier fraction after the polish below which a step fails", low=0.0,
-                               high=0.99)
+    min_fitness: float = param(0.15, "inlier fraction after the polish below which a step fails whatever the "
+                               "running level: too little overlap to be evidence (a right answer against a young "
+                               "map of sparse scans fits ~0.2)", low=0.0, high=0.99)
     fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
                                 "level", low=0.01, high=1.0)
     confirm_ratio: float = param(0.9, "an answer that only one start reached must fit at least this fraction of "
