@@ -9,6 +9,7 @@ from cemnet_ros.pipeline.steps.preprocess import (
     robust_radius,
     subsample,
     voxel_downsample,
+    voxel_downsample_in_range,
 )
 
 
@@ -32,6 +33,26 @@ def test_voxel_downsample_takes_centroids():
     expected = np.array([[-0.5, 0.5, 0.5], [0.2, 0.2, 0.2], [1.5, 0.2, 0.2]])
     np.testing.assert_allclose(out[np.lexsort(out.T[::-1])], expected[np.lexsort(expected.T[::-1])])
     np.testing.assert_array_equal(voxel_downsample(pts, 0.0), pts)
+
+
+def test_voxel_downsample_in_range_is_the_crop_then_the_grid_bit_for_bit():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-30.0, 30.0, (20000, 3))
+    pts[::7] = np.nan
+    pts[3::11, 1] = np.inf
+    for min_range, max_range in [(0.0, 0.0), (2.0, 25.0), (0.0, 10.0)]:
+        kept = finite_in_range(pts, min_range, max_range)
+        for source in (pts, pts.astype(np.float32)):
+            dense, n_in_range = voxel_downsample_in_range(source, 0.7, min_range, max_range)
+            expected = voxel_downsample(finite_in_range(source, min_range, max_range), 0.7)
+            assert n_in_range == len(kept)
+            np.testing.assert_array_equal(dense, expected)
+    with_intensity = np.hstack([pts, np.ones((len(pts), 1))]).astype(np.float32)
+    np.testing.assert_array_equal(voxel_downsample_in_range(with_intensity[:, :3], 0.7)[0],
+                                  voxel_downsample(finite_points(with_intensity[:, :3]), 0.7))
+    np.testing.assert_array_equal(voxel_downsample_in_range(pts, 0.0, 2.0, 25.0)[0], finite_in_range(pts, 2.0, 25.0))
+    empty, none_in_range = voxel_downsample_in_range(pts, 0.7, 100.0, 200.0)
+    assert empty.shape == (0, 3) and none_in_range == 0
 
 
 def test_subsample_is_seeded_and_farthest_spreads():

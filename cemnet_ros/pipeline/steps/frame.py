@@ -17,7 +17,7 @@ from cemnet_ros.pipeline.config import AlignerConfig, PreprocessConfig
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
-from cemnet_ros.pipeline.steps.preprocess import finite_in_range, robust_radius, subsample, voxel_downsample
+from cemnet_ros.pipeline.steps.preprocess import finite_in_range, robust_radius, subsample, voxel_downsample_in_range
 
 LOST_RESCALE_RATIO = 2.0  # a lost trajectory measures the auto scale again on a scan this much larger or smaller
 
@@ -88,9 +88,13 @@ def polish_voxel(voxel: float, scale: float) -> float:
     return voxel if voxel > 0 else scale / 100.0
 
 
-def voxel_cloud(points_cropped: np.ndarray, config: PreprocessConfig, voxel: float) -> np.ndarray:
-    """The voxel cloud of a cropped scan (the map's points, :attr:`Frame.dense`); ScanRejected when too few."""
-    dense = voxel_downsample(points_cropped, voxel)
+def voxel_cloud(points: np.ndarray, config: PreprocessConfig, voxel: float) -> np.ndarray:
+    """The voxel cloud of a scan's finite points within the range crop (the map's points, :attr:`Frame.dense`);
+    ScanRejected when too few are in range or remain."""
+    dense, n_in_range = voxel_downsample_in_range(points, voxel, config.min_range, config.max_range)
+    if n_in_range < config.min_points:
+        raise ScanRejected(f"too few points: {n_in_range} after range crop, need {config.min_points}",
+                           "too_few_points")
     if len(dense) < config.min_points:
         raise ScanRejected(f"too few points: {len(dense)} after preprocessing, need {config.min_points}",
                            "too_few_points")
@@ -130,12 +134,11 @@ class Preprocessor:
         Raises ScanRejected.
         """
         cfg = self.config.preprocess
-        kept = cropped(points, cfg)
         scale = self.scale if scale is None else scale
         if scale is None:
-            scale = measured_scale(kept)
+            scale = measured_scale(cropped(points, cfg))
         voxel = voxel_size(cfg, scale)
-        dense = voxel_cloud(kept, cfg, voxel)
+        dense = voxel_cloud(points, cfg, voxel)
         near = near_points(dense, cfg, scale)
         seed = max(self.config.registration.seed, 0)
         return Frame(dense, subsample(dense, self.config.polish.points, "random", seed),

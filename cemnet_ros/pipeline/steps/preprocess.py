@@ -44,7 +44,23 @@ def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
     """
     if voxel_size <= 0.0 or len(points) == 0:
         return points
-    return _voxel_centroids(np.ascontiguousarray(points, dtype=np.float64), float(voxel_size))
+    return _voxel_centroids(np.ascontiguousarray(points, dtype=np.float64), float(voxel_size), 0.0, np.inf)[0]
+
+
+def voxel_downsample_in_range(points: np.ndarray, voxel_size: float, min_range: float = 0.0,
+                              max_range: float = 0.0) -> tuple[np.ndarray, int]:
+    """(:func:`voxel_downsample` of :func:`finite_in_range`, the number of points in range) in two passes over the
+    scan and no copy of it: the same centroids, bit for bit. voxel_size <= 0: the points in range themselves."""
+    if voxel_size <= 0.0:
+        kept = finite_in_range(points, min_range, max_range)
+        return kept, len(kept)
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
+    if pts.dtype not in (np.float32, np.float64):
+        pts = pts.astype(np.float64)
+    return _voxel_centroids(pts, float(voxel_size), float(min_range) if min_range > 0.0 else 0.0,
+                            float(max_range) if max_range > 0.0 else np.inf)
 
 
 @kernel
@@ -104,23 +120,34 @@ def _doubled(table, bits):
     return bigger
 
 
-RECENT = 256  # voxels remembered by key outside the hash table (a power of two): a scan revisits them
+RECENT = 4096  # voxels remembered by key outside the hash table (a power of two): a scan revisits them
 
 
 @kernel
-def _voxel_centroids(points, voxel_size):
-    """Centroid per voxel floor(p / voxel_size), in one pass through a hash table of int64 voxel keys.
+def _voxel_centroids(points, voxel_size, min_range, max_range):
+    """(centroid per voxel floor(p / voxel_size), points counted) over the rows of ``points`` with finite
+    coordinates whose norm lies in [min_range, max_range], in one pass through a hash table of int64 voxel keys.
 
-    Keys count cells from the lowest occupied one (a mixed-radix number), so no coordinate range is too large.
-    The table starts small (scans have several points per voxel) and doubles when half full; consecutive
-    points of a scan mostly share a voxel, so the previous point's voxel is tried first. One long kernel: numba
+    A first pass marks the kept rows and finds their extremes (floor(x / voxel_size) is monotone in x). Keys
+    count cells from the lowest occupied one (a mixed-radix number), so no coordinate range is too large. The
+    table starts small (scans have several points per voxel) and doubles when half full; a scan revisits the
+    voxels it has just filled, so a small table of recent voxels by key is tried first. One long kernel: numba
     compiles no closures, and split into calls the hot loop would pass the table back and forth.
     """
-    n = points.shape[0]
-    lo, hi = np.empty(3, dtype=np.int64), np.empty(3, dtype=np.int64)
-    for k in range(3):  # floor(x / voxel_size) is monotone in x: the extreme cells are those of the extremes
-        lo[k] = np.int64(np.floor(points[:, k].min() / voxel_size))
-        hi[k] = np.int64(np.floor(points[:, k].max() / voxel_size))
+    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    keep = np.empty(points.shape[0], dtype=np.bool_)
+    n = 0
+    for i in range(points.shape[0]):
+        x, y, z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+        keep[i] = np.isfinite(x) and np.isfinite(y) and np.isfinite(z) and \
+            min_range <= np.sqrt(x * x + y * y + z * z) <= max_range
+        if keep[i]:
+            n += 1
+            low[0], low[1], low[2] = min(low[0], x), min(low[1], y), min(low[2], z)
+            high[0], high[1], high[2] = max(high[0], x), max(high[1], y), max(high[2], z)
+    if n == 0:
+        return np.empty((0, 3)), 0
+    lo, hi = np.floor(low / voxel_size).astype(np.int64), np.floor(high / voxel_size).astype(np.int64)
     dim_y, dim_z = hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
     bits = 10
     while (1 << bits) < n // 2:
@@ -130,8 +157,10 @@ def _voxel_centroids(points, voxel_size):
     counts = np.empty(n, dtype=np.int64)
     n_voxels = 0
     recent = np.full((RECENT, 2), -1, dtype=np.int64)  # (key, voxel) of recently seen voxels, by key % RECENT
-    for i in range(n):
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+    for i in range(points.shape[0]):
+        if not keep[i]:
+            continue
+        x, y, z = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
         key = ((np.int64(np.floor(x / voxel_size)) - lo[0]) * dim_y
                + np.int64(np.floor(y / voxel_size)) - lo[1]) * dim_z + np.int64(np.floor(z / voxel_size)) - lo[2]
         r = key & (RECENT - 1)
@@ -157,7 +186,7 @@ def _voxel_centroids(points, voxel_size):
     for v in range(n_voxels):
         for k in range(3):
             out[v, k] = sums[v, k] / counts[v]
-    return out
+    return out, n
 
 
 def farthest_point_indices(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
@@ -203,3 +232,5 @@ def compile_kernels() -> None:
     finite_points(with_intensity[:, :3])
     finite_in_range(with_intensity[:, :3], 0.1, 1.0)
     voxel_downsample(finite_in_range(with_intensity[:, :3].astype(np.float64), 0.1, 1.0), 0.5)
+    voxel_downsample_in_range(with_intensity[:, :3], 0.5, 0.1, 1.0)
+    voxel_downsample_in_range(with_intensity[:, :3].astype(np.float64), 0.5, 0.1, 1.0)
