@@ -91,8 +91,9 @@ def _xyz_rows(msg: Any) -> Tuple[np.ndarray, np.ndarray]:
     buf = as_bytes(msg.data)
     views = _xyz_views(msg, buf)
     points = np.empty((int(msg.height) * int(msg.width), 3), dtype=np.float64)
-    for axis, view in enumerate(views):
-        points[:, axis] = view.reshape(-1)
+    with np.errstate(invalid="ignore"):  # a signalling NaN in the data flags its conversion; it stays non-finite
+        for axis, view in enumerate(views):
+            points[:, axis] = view.reshape(-1)
     return points, buf
 
 
@@ -225,7 +226,8 @@ def transformed_cloud(msg_cls: Any, cloud: Any, T_frame_cloud: np.ndarray, frame
     the stamp too (float32/64 coordinates; classes as in :func:`make_pointcloud2`)."""
     data = as_bytes(cloud.data).copy()
     views = _xyz_views(cloud, data)
-    moved = apply_transform(T_frame_cloud, np.stack([v.reshape(-1).astype(np.float64) for v in views], axis=1))
+    with np.errstate(invalid="ignore"):  # as in _xyz_rows: signalling NaNs stay non-finite, silently
+        moved = apply_transform(T_frame_cloud, np.stack([v.reshape(-1).astype(np.float64) for v in views], axis=1))
     for axis, view in enumerate(views):
         view[...] = moved[:, axis].reshape(view.shape)
     body = dict(height=cloud.height, width=cloud.width, fields=list(cloud.fields), is_bigendian=cloud.is_bigendian,

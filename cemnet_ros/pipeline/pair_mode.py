@@ -74,7 +74,7 @@ class PairMode:
             relative=None if previous is None else np.linalg.inv(previous) @ pose,
             covariance_inflation=self.config.health.covariance_inflation, latency_s=time.perf_counter() - start,
             n_points=len(frame.sampled), reason="; ".join(estimate.failures + estimate.notes),
-            recovery_reason=registered.why_recovered)
+            recovery_reason=registered.why_recovered, polishes=registered.contest.polishes)
         step.warnings = admitted.warnings + target_warnings
         return step
 
