@@ -13,14 +13,17 @@ from cemnet_ros.pipeline.config import SAMPLING_METHODS
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: multiply, keep the top bits
 
 
-def finite_points(points: np.ndarray) -> np.ndarray:
-    """(n, 3) float64 rows whose three coordinates are all finite."""
+def _xyz_array(points: np.ndarray) -> np.ndarray:
+    """``points`` as an (n, 3) float32 or float64 array (other dtypes converted to float64); ValueError otherwise."""
     pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
-    if pts.dtype not in (np.float32, np.float64):
-        pts = pts.astype(np.float64)
-    return _finite_rows(pts)
+    return pts if pts.dtype in (np.float32, np.float64) else pts.astype(np.float64)
+
+
+def finite_points(points: np.ndarray) -> np.ndarray:
+    """(n, 3) float64 rows whose three coordinates are all finite."""
+    return _finite_rows(_xyz_array(points))
 
 
 def finite_in_range(points: np.ndarray, min_range: float = 0.0, max_range: float = 0.0) -> np.ndarray:
@@ -28,13 +31,7 @@ def finite_in_range(points: np.ndarray, min_range: float = 0.0, max_range: float
     over the scan; 0 disables a bound."""
     if min_range <= 0.0 and max_range <= 0.0:
         return finite_points(points)
-    pts = np.asarray(points)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
-    if pts.dtype not in (np.float32, np.float64):
-        pts = pts.astype(np.float64)
-    return _finite_rows_in_range(pts, float(min_range) if min_range > 0.0 else 0.0,
-                                 float(max_range) if max_range > 0.0 else np.inf)
+    return _finite_rows_in_range(_xyz_array(points), *_range_bounds(min_range, max_range))
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
@@ -54,13 +51,12 @@ def voxel_downsample_in_range(points: np.ndarray, voxel_size: float, min_range: 
     if voxel_size <= 0.0:
         kept = finite_in_range(points, min_range, max_range)
         return kept, len(kept)
-    pts = np.asarray(points)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"points must have shape (n, 3), not {pts.shape}")
-    if pts.dtype not in (np.float32, np.float64):
-        pts = pts.astype(np.float64)
-    return _voxel_centroids(pts, float(voxel_size), float(min_range) if min_range > 0.0 else 0.0,
-                            float(max_range) if max_range > 0.0 else np.inf)
+    return _voxel_centroids(_xyz_array(points), float(voxel_size), *_range_bounds(min_range, max_range))
+
+
+def _range_bounds(min_range: float, max_range: float) -> tuple[float, float]:
+    """The kernels' [low, high] range bounds of a crop whose 0 disables a bound."""
+    return float(min_range) if min_range > 0.0 else 0.0, float(max_range) if max_range > 0.0 else np.inf
 
 
 @kernel
