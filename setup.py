@@ -50,8 +50,8 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "align_node = cemnet_ros.ros.align_node:main",
-            "align_lifecycle_node = cemnet_ros.ros.align_lifecycle_node:main",
+            "align_node = cemnet_ros.ros.entry_points:align_node",
+            "align_lifecycle_node = cemnet_ros.ros.entry_points:align_lifecycle_node",
             "cemnet-register = cemnet_ros.tools.register_cli:main",
             "cemnet-eval = cemnet_ros.tools.eval_cli:main",
             "cemnet-bench = cemnet_ros.tools.bench_cli:main",
