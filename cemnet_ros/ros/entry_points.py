@@ -21,12 +21,9 @@ def align_lifecycle_node() -> None:
 
 
 def _start(module: str) -> None:
-    """Import ``module`` and run its ``main``; a Ctrl-C before its node spins exits 0 without a traceback."""
+    """Import ``module`` and run its ``main``; a Ctrl-C before its node spins (while importing, or between
+    rclpy.init and the node's own handling: nothing to tear down yet) exits 0 without a traceback."""
     try:
-        main = importlib.import_module(module).main
+        importlib.import_module(module).main()
     except KeyboardInterrupt:
-        sys.exit(0)
-    try:
-        main()
-    except KeyboardInterrupt:  # between rclpy.init and the node's own handling: nothing to tear down yet
         sys.exit(0)
