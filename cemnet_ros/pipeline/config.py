@@ -82,6 +82,12 @@ class HealthConfig:
     confirm_ratio: float = param(0.9, "an answer that only one start reached must fit at least this fraction of "
                                  "the running level; below it the global search competes with it (tracking) or "
                                  "the step fails (recovery)", low=0.0, high=1.0)
+    coverage_distance: float = param(6.0, "a scan point is covered by the map when a map point lies this close "
+                                     "(frame voxels)", low=0.1)
+    confirm_coverage: float = param(0.95, "an answer covering this fraction of the scan needs no rival to be "
+                                    "confirmed; tracking's answer covering less, reached from one start the "
+                                    "prediction does not explain, is checked by the global search", low=0.0,
+                                    high=1.01)
     level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
                                 low=0.0, high=0.999)
     min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
@@ -123,7 +129,7 @@ class TrackingConfig:
                         choices=TRACKING_CENTRES)
     identity_sigma: float = param(1.0, "spread of the 'identity' centre (rad and network units; paper: N(0, I))",
                                   low=1e-4)
-    tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in fitness are a "
+    tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in consistency are a "
                              "near-tie: the one next to the prediction is kept, flagged", low=0.01, high=1.0)
     local_first: bool = param(True, "polish the prediction first; the CEM samples only when that answer does not "
                               "stand (false: the CEM on every step, as the method alone)")
@@ -174,8 +180,14 @@ class RecoveryConfig:
                                  "precision)", low=32)
     gap: float = param(1.0, "after a stamp gap longer than this (s) tracking's answer must fit at "
                        "health.confirm_ratio x the running level, or the global search competes with it", low=1e-3)
-    ambiguity_ratio: float = param(0.95, "a distinct hypothesis this close in fitness makes the answer ambiguous",
+    ambiguity_ratio: float = param(0.95, "a distinct hypothesis this close in consistency makes the answer "
+                                   "ambiguous",
                                    low=0.01, high=1.0)
+    turn_yaw: float = param(90.0, "the search also polishes the last pose turned about its z axis by up to "
+                            "this (deg) either way; 0 = no turns", low=0.0, high=180.0)
+    turn_step: float = param(30.0, "... in steps of this (deg: about the wide polish's reach)", low=1.0, high=180.0)
+    turn_tilt: float = param(20.0, "... each also tilted by this (deg) about its x and y axes either way; 0 = "
+                             "yaw only", low=0.0, high=90.0)
     restart_after: int = param(3, "consecutive failed steps after which the map restarts from the scan (lost)",
                                low=1)
     scatter: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_network "

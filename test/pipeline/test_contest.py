@@ -20,6 +20,7 @@ REACH = 0.2  # m: the fake fine polish's pairing distance
 class Basin:
     pose: np.ndarray
     fitness: float
+    coverage: float = 1.0
 
 
 class Landscape:
@@ -50,6 +51,10 @@ class Landscape:
         basin = self._nearest(T, 1e-6)
         return 0.1 if basin is None else basin.fitness
 
+    def coverage(self, T: np.ndarray) -> float:
+        basin = self._nearest(T, 1e-6)
+        return 0.5 if basin is None else basin.coverage
+
 
 class Judge:
     """A fake StepJudge: fitness from the landscape, the real running level and confirmation."""
@@ -62,7 +67,8 @@ class Judge:
     def judge(self, frame, target_map, T_predicted, T_start, polish, spread_m, recovered, prediction_std, origin):
         fitness = self.landscape.fitness(polish.T_target_source)
         failures = [] if fitness >= 0.3 else ["low fitness"]
-        return Estimate(polish.T_target_source, np.eye(6), Signals(fitness, 0.0, 0.0, 1.0, 0.0), failures, [],
+        signals = Signals(fitness, 0.0, 0.0, 1.0, 0.0, coverage=self.landscape.coverage(polish.T_target_source))
+        return Estimate(polish.T_target_source, np.eye(6), signals, failures, [],
                         recovered, np.zeros((6, 0)), 10.0, origin)
 
 
@@ -123,12 +129,33 @@ def test_a_start_entered_twice_is_polished_once():
     assert c.enter(at(0.0), Origin.PREDICTION, wide=True) is None  # the wide one lands on the same answer
 
 
-def test_the_fittest_answer_wins_when_no_other_comes_close():
+def test_the_most_consistent_answer_wins_when_no_other_comes_close():
     c = contest(Basin(at(0.1), 0.5), Basin(at(1.5), 0.9))
     c.enter(at(0.0), Origin.PREDICTION)
     c.enter(at(1.4), Origin.LAST_POSE, wide=True)
     chosen = c.choose(0.95)
     assert chosen.origin == "last pose" and not chosen.failures and not chosen.tied
+
+
+def test_a_fitter_answer_that_leaves_part_of_the_scan_off_the_map_loses_to_one_that_covers_it():
+    c = contest(Basin(at(1.5), 0.62, coverage=0.99), Basin(at(-1.5), 0.66, coverage=0.85))
+    c.enter(at(1.4), Origin.TURN, wide=True)
+    c.enter(at(-1.4), Origin.SEARCH, wide=True)
+    chosen = c.choose(0.95)
+    assert np.allclose(chosen.T_odom_sensor, at(1.5)) and not chosen.failures and not chosen.tied
+    assert c.ranked()[0] is chosen
+
+
+def test_a_near_tie_in_consistency_is_one_within_the_tie_ratio_of_the_best_fitness():
+    c = contest(Basin(at(1.5), 0.80, coverage=0.98), Basin(at(-1.5), 0.80, coverage=0.95))
+    c.enter(at(1.4), Origin.CEM, wide=True)
+    c.enter(at(-1.4), Origin.LAST_POSE, wide=True)
+    assert "ambiguous" in c.choose(0.95).failures[-1]  # 0.03 apart, within 0.05 x 0.80
+    c = contest(Basin(at(1.5), 0.80, coverage=0.98), Basin(at(-1.5), 0.80, coverage=0.92))
+    c.enter(at(1.4), Origin.CEM, wide=True)
+    c.enter(at(-1.4), Origin.LAST_POSE, wide=True)
+    chosen = c.choose(0.95)
+    assert np.allclose(chosen.T_odom_sensor, at(1.5)) and not chosen.failures  # 0.06 apart: no tie
 
 
 def test_a_near_tie_keeps_the_answer_next_to_the_prediction_flagged():

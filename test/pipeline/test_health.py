@@ -79,6 +79,20 @@ def test_an_answer_below_the_level_needs_a_second_start_and_after_a_gap_the_leve
     assert monitor.unconfirmed(0.75, 1, after_gap=True) == ""
 
 
+def test_an_answer_that_covers_the_scan_is_confirmed_by_its_coverage():
+    monitor = HealthMonitor(HealthConfig(confirm_ratio=0.9, confirm_coverage=0.95))
+    monitor.accept(0.8)
+    assert "one start only" in monitor.unconfirmed(0.6, 1, coverage=0.94)
+    assert monitor.unconfirmed(0.6, 1, coverage=0.95) == ""
+    assert monitor.unconfirmed(0.6, 1, after_gap=True, coverage=0.97) == ""
+    assert monitor.covers(0.95) and not monitor.covers(0.94)
+
+
+def test_consistency_is_the_share_on_surfaces_less_the_share_off_the_map():
+    assert with_(fitness=0.6, coverage=0.99).consistency == pytest.approx(0.59)
+    assert with_(fitness=0.65, coverage=0.85).consistency == pytest.approx(0.5)
+
+
 def corridor_hessian(length=10.0):
     """Point-to-plane Hessian of a corridor along x: normals +-y (walls) and +-z (floor, ceiling) only."""
     rng = np.random.default_rng(0)

@@ -119,6 +119,21 @@ def test_inlier_fraction_counts_points_near_the_map_after_the_transform():
     assert voxel_map.inlier_fraction(np.zeros((0, 3)), T, 0.01) == 0.0
 
 
+def test_overlap_gives_the_inlier_fraction_and_the_share_within_reach_of_the_map():
+    rng = np.random.default_rng(9)
+    floor = np.c_[rng.uniform(0.0, 10.0, (4000, 2)), np.zeros(4000)]
+    voxel_map = VoxelMap(0.5, max_points_per_voxel=20)
+    voxel_map.update(floor, np.zeros(3))
+    on_floor = np.c_[rng.uniform(1.0, 9.0, (600, 2)), np.zeros(600)]
+    just_above = on_floor[:300] + [0.0, 0.0, 0.3]  # near the floor, off its plane
+    off_map = np.c_[rng.uniform(30.0, 40.0, (100, 2)), np.zeros(100)]  # where the map has nothing
+    source = np.vstack([on_floor, just_above, off_map])
+    fitness, coverage = voxel_map.overlap(source, np.eye(4), 0.5, 0.05, 1.0)
+    assert fitness == pytest.approx(600 / 1000) and coverage == pytest.approx(900 / 1000)
+    assert fitness == voxel_map.inlier_fraction(source, np.eye(4), 0.5, 0.05)
+    assert voxel_map.overlap(np.zeros((0, 3)), np.eye(4), 0.5, 0.05, 1.0) == (0.0, 0.0)
+
+
 def test_sample_is_seeded_and_bounded_by_the_radius():
     rng = np.random.default_rng(8)
     voxel_map = VoxelMap(1.0, max_points_per_voxel=10)

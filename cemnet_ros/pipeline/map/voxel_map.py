@@ -138,18 +138,26 @@ class VoxelMap:
         """Fraction of ``source`` (source frame) that lies on the map after ``T_map_source``: the nearest map
         point within ``distance`` and, within ``residual`` of its plane (of the point itself where it has no
         normal). The plane test tells centimetres apart on any map density: a nearest-point radius does not."""
+        return self.overlap(source, T_map_source, distance, residual, distance)[0]
+
+    def overlap(self, source: np.ndarray, T_map_source: np.ndarray, distance: float, residual: float,
+                reach: float) -> tuple[float, float]:
+        """(:meth:`inlier_fraction`, coverage) of ``source`` after ``T_map_source``, from one nearest-point query:
+        the coverage is the fraction with a map point within ``reach`` (>= ``distance``), the share of the scan
+        that lands where the map has surfaces at all."""
         source = np.asarray(source, dtype=np.float64).reshape(-1, 3)
         if len(source) == 0:
-            return 0.0
+            return 0.0, 0.0
         moved = apply_transform(np.asarray(T_map_source, dtype=np.float64), source)
-        dist, slots = self._query(moved, distance)
-        found = slots >= 0
+        dist, slots = self._query(moved, max(reach, distance))
+        covered = float(np.count_nonzero(slots >= 0)) / len(source)
+        found = dist <= distance
         if not np.isfinite(residual):
-            return float(np.count_nonzero(found)) / len(source)
+            return float(np.count_nonzero(found)) / len(source), covered
         slots, dist = slots[found], dist[found]
         offsets = np.einsum("ij,ij->i", self._normals[slots], moved[found] - self._pts[slots])
         off_plane = np.where(self._planarity[slots] > 0.0, np.abs(offsets), dist)
-        return float(np.count_nonzero(off_plane <= residual)) / len(source)
+        return float(np.count_nonzero(off_plane <= residual)) / len(source), covered
 
     def sample(self, n: int, centre: np.ndarray, radius: float, seed: int = 0) -> np.ndarray:
         """At most ``n`` map points within ``radius`` of ``centre``: a seeded random subset (the CEM's target)."""

@@ -5,16 +5,22 @@ the precision the node vouches for (``DISTINCT_M``, ``DISTINCT_RAD``: metres and
 size or the auto scale) are one answer; the kinds of start that reached it are its *support*. A wide polish
 whose basin stage lands on an answer already there adds its support and is not polished again.
 
+Answers rank by their *consistency* with the map (:attr:`~.health.Signals.consistency`: the share of the scan on
+the map's surfaces less the share where the map has none). Fitness alone does not tell a wrong basin from the
+right one in a regular building: a pose turned by 90 deg or shifted by a room fits the walls about as well as the
+truth, but leaves part of the scan in empty space.
+
 An answer **stands** (the scan needs no further start) when it has no failure, fits at ``health.confirm_ratio`` x
 the running level, and the prediction explains it: its polish converged within reach of the prediction, or two
-kinds of start reached it within the prediction's spread (``near``). Fitness alone does not tell a wrong basin
-from the right one, so an answer the prediction does not explain needs rivals.
+kinds of start reached it within the prediction's spread (``near``). An answer the prediction does not explain
+needs rivals.
 
-When none stands, the fittest answer wins; distinct answers within ``tie_ratio`` of the best fitness are a
-near-tie the scene cannot settle: the one next to the prediction is kept and flagged (a symmetric scene; the map
-does not take it in), and when none is next to it the step fails as ambiguous. A distant answer never replaces a
-near one of similar fitness. The global search's hypotheses count once towards support: several of them
-converging to one basin is no independent evidence.
+When none stands, the most consistent answer wins; distinct answers whose consistency falls short of the best
+one's by less than ``1 - tie_ratio`` of its fitness are a near-tie the scene cannot settle: the one next to the
+prediction is kept and flagged (a symmetric scene; the map does not take it in), and when none is next to it the
+step fails as ambiguous. A distant answer never replaces a near one of similar consistency. The global search's
+hypotheses count once towards support: several of them converging to one basin is no independent evidence; the
+turns of the last pose (:mod:`.recovery`) likewise.
 """
 from __future__ import annotations
 
@@ -37,6 +43,7 @@ class Origin(str, enum.Enum):
     CEM = "cem"  # the tracking CEM's answer around the prediction
     LAST_POSE = "last pose"  # the sensor did not move as it did (a stop, a jerk, a turn reversed)
     SEARCH = "search"  # a hypothesis of the global search
+    TURN = "turn"  # the last pose turned by a few tens of degrees (the recovery's grid of turns)
 
 
 def distinct(T_a: np.ndarray, T_b: np.ndarray) -> bool:
@@ -98,9 +105,9 @@ class Contest:
         return len({origin for origin, T in self._arrivals if not distinct(T, answer.T_odom_sensor)})
 
     def standing(self) -> Optional[Estimate]:
-        """The fittest answer that stands (see the module), or None."""
+        """The most consistent answer that stands (see the module), or None."""
         level = self.judge.health.level
-        for answer in sorted(self.answers, key=lambda a: -a.signals.fitness):
+        for answer in self.ranked():
             if answer.failures or level is None or self.judge.health.unconfirmed(answer.signals.fitness, 1):
                 continue
             if answer.explained or (self.support(answer) >= 2 and self._near(answer)):
@@ -109,26 +116,32 @@ class Contest:
         return None
 
     def choose(self, tie_ratio: float) -> Estimate:
-        """The fittest answer, or among distinct near-ties the one nearest the prediction (see the module)."""
-        ranked = sorted(self.answers, key=lambda a: -a.signals.fitness)
+        """The most consistent answer, or among distinct near-ties the one nearest the prediction (see the
+        module)."""
+        ranked = self.ranked()
         for answer in ranked:
             answer.support = self.support(answer)
         best = ranked[0]
         ties = [best]
+        margin = (1.0 - tie_ratio) * best.signals.fitness  # on a scan the map covers: within tie_ratio in fitness
         for answer in ranked[1:]:
-            if answer.signals.fitness >= tie_ratio * best.signals.fitness and all(
+            if answer.signals.consistency >= best.signals.consistency - margin and all(
                     distinct(answer.T_odom_sensor, kept.T_odom_sensor) for kept in ties):
                 ties.append(answer)
         if len(ties) == 1:
             return best
         nearest = min(ties, key=lambda a: a.offset_from(self.T_predicted)[0])
-        summary = f"{len(ties)} distinct answers within {tie_ratio:.2f} of the best fitness"
+        summary = f"{len(ties)} distinct answers within {margin:.3f} of the best consistency"
         if self._near(nearest):
             nearest.notes.append(f"symmetric scene: {summary}, the one next to the motion prediction kept")
             nearest.tied = True
             return nearest
         best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")
         return best
+
+    def ranked(self) -> list[Estimate]:
+        """The answers, most consistent first."""
+        return sorted(self.answers, key=lambda a: -a.signals.consistency)
 
     def _near(self, answer: Estimate) -> bool:
         """Within ``near`` of the prediction along the directions the scene constrains."""

@@ -1,12 +1,14 @@
 """Recovery (step 5 of the recipe in :mod:`..aligner`): the global CEM search when tracking cannot be trusted.
 
-It runs on the first pair, when tracking failed or is unconfirmed, or on request: the search
-(:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation; with
-``recovery.scatter`` 'network' also candidates drawn from the sampling network's prior) returns distinct
-hypotheses; each one close to the best in fitness enters tracking's contest (:mod:`.contest`), polished wide.
-Without tracking's answers the guess itself (the motion prediction) and the last pose compete too: a distant
-hypothesis never replaces a near answer of similar fitness, and distinct near-ties keep a symmetric scene from
-being published as a confident answer.
+It runs on the first pair, when tracking failed or doubts its answer, or on request: the search
+(:func:`~cemnet_ros.core.global_search.global_search`: yaw over the full circle, metres of translation, the tilt of
+the guess; with ``recovery.scatter`` 'network' also candidates drawn from the sampling network's prior) returns
+distinct hypotheses; each one close to the best in fitness enters tracking's contest (:mod:`.contest`), polished
+wide. The last pose turned by a grid of yaws and tilts (:func:`turns`) enters too: a handheld sensor turns and
+tilts tens of degrees between sparse scans, where the prediction, and the search around its tilt, are lost, and
+the wide polish reaches the truth from a start within about 15 deg of it. Without tracking's answers the guess
+itself (the motion prediction) and the last pose compete too: a distant hypothesis never replaces a near answer
+of similar consistency, and distinct near-ties keep a symmetric scene from being published as a confident answer.
 """
 from __future__ import annotations
 
@@ -18,10 +20,10 @@ import torch
 
 from cemnet_ros.core import Registrar, RegistrationConfig
 from cemnet_ros.core.config import GlobalSearchConfig
-from cemnet_ros.core.geometry import apply_transform
+from cemnet_ros.core.geometry import apply_transform, euler_to_matrix_np
 from cemnet_ros.core.global_search import SearchPrior, global_search
 from cemnet_ros.core.registration import NETWORK_MIN_POINTS
-from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.config import AlignerConfig, RecoveryConfig
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.contest import Contest, Origin
 from cemnet_ros.pipeline.steps.frame import Frame
@@ -52,6 +54,27 @@ def lean_search(search: GlobalSearchConfig, effort: float) -> GlobalSearchConfig
                                n_per_seed=round(effort * search.n_per_seed))
 
 
+def turns(T_pose: np.ndarray, config: RecoveryConfig) -> list[np.ndarray]:
+    """``T_pose`` turned about its own z axis by every ``recovery.turn_step`` up to ``recovery.turn_yaw`` either
+    way, each also tilted by ``recovery.turn_tilt`` either way about its x and about its y axis (``T_pose`` itself
+    excluded; none when ``turn_yaw`` is 0)."""
+    if config.turn_yaw <= 0.0:
+        return []
+    n = int(config.turn_yaw // config.turn_step)
+    yaws = np.radians(config.turn_step) * np.arange(-n, n + 1)
+    tilt = np.radians(config.turn_tilt)
+    tilts = [(0.0, 0.0)] + ([(tilt, 0.0), (-tilt, 0.0), (0.0, tilt), (0.0, -tilt)] if tilt > 0.0 else [])
+    out = []
+    for yaw in yaws:
+        for pitch, roll in tilts:
+            if yaw == 0.0 and pitch == 0.0 and roll == 0.0:
+                continue
+            T_turned = T_pose.copy()
+            T_turned[:3, :3] = T_pose[:3, :3] @ euler_to_matrix_np(np.array([yaw, pitch, roll]))
+            out.append(T_turned)
+    return out
+
+
 class Recovery:
     """The global search around a guess, its hypotheses polished and judged in the contest, the best chosen."""
 
@@ -63,8 +86,8 @@ class Recovery:
     def recover(self, frame: Frame, target_map: VoxelMap, contest: Contest,
                 T_fallback: Optional[np.ndarray] = None, T_last: Optional[np.ndarray] = None) -> Estimate:
         """The global CEM search around the contest's prediction (the guess), each hypothesis entering
-        ``contest``; a contest without answers (tracking did not run) gets the polished guess and ``T_last``
-        (the last pose) too. The chosen answer fails unless it is confirmed
+        ``contest``, and the turns of ``T_last`` (the last pose); a contest without answers (tracking did not
+        run) gets the polished guess and ``T_last`` itself too. The chosen answer fails unless it is confirmed
         (:meth:`~.health.HealthMonitor.unconfirmed`).
 
         ``T_fallback``: where to search instead when the map has no points near the guess (a wild prediction
@@ -100,12 +123,24 @@ class Recovery:
             if hypothesis.fitness < POLISH_FRACTION * hypotheses[0].fitness:
                 break  # far behind the best: not worth a polish, nor a rival
             contest.enter(units.pose_in_metres(hypothesis.T_target_source) @ T_guess, Origin.SEARCH, wide=True)
+        if T_last is not None and not self._settled(contest):
+            for T_turned in turns(T_last, rec):
+                contest.enter(T_turned, Origin.TURN, wide=True)
         chosen = contest.choose(rec.ambiguity_ratio)
         chosen.recovered = True  # this step ran the global search, whichever answer won
-        why = self.judge.health.unconfirmed(chosen.signals.fitness, chosen.support)
+        why = self.judge.health.unconfirmed(chosen.signals.fitness, chosen.support,
+                                            coverage=chosen.signals.coverage)
         if why and not chosen.failures:
             chosen.failures.append(why)
         return chosen
+
+    def _settled(self, contest: Contest) -> bool:
+        """The most consistent answer so far stands without the turns: no failure, confirmed by its fitness and
+        covering the scan (the recovery, like tracking, stops at the first answer that stands)."""
+        health = self.judge.health
+        best = contest.ranked()[0] if contest.answers else None
+        return best is not None and not best.failures and health.covers(best.signals.coverage) and not \
+            health.unconfirmed(best.signals.fitness, 1)
 
     def _network_prior(self, source: np.ndarray, target: np.ndarray) -> Optional[SearchPrior]:
         """The network's raw mu0, sigma0 for the search's clouds in units (None: no network, or too few points)."""

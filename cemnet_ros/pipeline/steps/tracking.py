@@ -9,7 +9,7 @@ An answer stands when it is confirmed and the prediction explains it (:mod:`.con
    (:class:`~.adaptive.AdaptiveSpread`); its answer polished wide (:mod:`.polish`: GICP, then fine);
 3. **the prediction from afar**: its GICP stage, which on a handheld turn usually lands on the CEM's answer
    (two kinds of start agree);
-4. **the last pose from afar**; then the fittest answer wins, near-ties go to the nearest.
+4. **the last pose from afar**; then the most consistent answer wins, near-ties go to the nearest.
 """
 from __future__ import annotations
 
@@ -74,11 +74,16 @@ class Tracker:
         return contest.choose(cfg.tracking.tie_ratio), contest
 
     def doubts(self, estimate: Estimate, after_gap: bool = False) -> list[str]:
-        """Why tracking's answer cannot stand without the global search (empty: it can): its failures, or it is
-        unconfirmed (:meth:`~.health.HealthMonitor.unconfirmed`)."""
+        """Why tracking's answer cannot stand without the global search (empty: it can): its failures, it is
+        unconfirmed (:meth:`~.health.HealthMonitor.unconfirmed`), or one start alone reached it, the prediction
+        does not explain it and it leaves part of the scan off the map (a wrong basin that fits well does)."""
         if estimate.failures:
             return list(estimate.failures)
-        why = self.judge.health.unconfirmed(estimate.signals.fitness, estimate.support, after_gap)
+        health, coverage = self.judge.health, estimate.signals.coverage
+        why = health.unconfirmed(estimate.signals.fitness, estimate.support, after_gap, coverage)
+        if not why and estimate.support < 2 and not estimate.explained and not health.covers(coverage):
+            why = (f"partly off the map: coverage {coverage:.3f} < {health.config.confirm_coverage:.3f}, reached "
+                   "from one start only")
         return [why] if why else []
 
     def _prediction_credible(self, polisher: Polisher, dt_ratio: float) -> bool:

@@ -131,10 +131,11 @@ class StepJudge:
         cfg = self.config.health
         T_final = polish.T_target_source
         conditioning = Conditioning.of(polish.hessian, frame.length)
-        fitness = target_map.inlier_fraction(frame.polish, T_final, self.config.polish.inlier_distance
-                                             * frame.polish_voxel, self.config.polish.inlier_residual)
+        fitness, coverage = target_map.overlap(frame.polish, T_final, self.config.polish.inlier_distance
+                                               * frame.polish_voxel, self.config.polish.inlier_residual,
+                                               cfg.coverage_distance * frame.polish_voxel)
         metres, radians = disagreement(T_start, T_final)
-        signals = Signals(fitness, metres, radians, conditioning.ratio, spread_m)
+        signals = Signals(fitness, metres, radians, conditioning.ratio, spread_m, coverage)
         failures = self.health.failures(signals)
         if polish.n_pairs < MIN_POLISH_PAIRS:
             failures.append(f"only {polish.n_pairs} point-to-plane pairs")
