@@ -67,7 +67,7 @@ class HealthMonitor:
         """Why this step cannot be vouched for (empty: it can). Degeneracy is not a failure: see degenerate().
 
         The CEM's agreement and spread are not judged: the CEM is one of the starts whose polished answers
-        compete (:mod:`.contest`); a wrong answer shows in its fitness or loses to a fitter one.
+        compete (:mod:`.contest`); a wrong answer shows in its fitness or loses to a more consistent one.
         """
         c, s, out = self.config, signals, []
         if s.fitness < c.min_fitness:
