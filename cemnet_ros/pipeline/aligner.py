@@ -7,10 +7,10 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    the CEM's subset and the polish's subset;
 2. **predict**: the constant-velocity pose, and how far to search around it (:class:`AdaptiveSpread`);
 3. **track** (:mod:`.steps.tracking`): the cheapest credible start first, stopping once an answer stands
-   (confirmed, and explained by the prediction): the prediction polished point to plane against the map, where
-   its recent errors lie within the polish's reach; else the CEM around the prediction against a sample of the
-   map, its answer polished from afar; then the prediction and the last pose from afar, competing
-   (:mod:`.steps.contest`);
+   (confirmed, and explained by the prediction or covering the scan): the prediction polished point to plane
+   against the map, where its recent errors lie within the polish's reach; then the prediction polished from
+   afar; then the CEM around the prediction against a sample of the map, its answer polished from afar; then
+   the last pose from afar, competing (:mod:`.steps.contest`);
 4. **judge** the step without ground truth (:mod:`.steps.verdict`: fitness in metres, confirmation,
    conditioning);
 5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit

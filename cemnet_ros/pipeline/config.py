@@ -131,8 +131,8 @@ class TrackingConfig:
                                   low=1e-4)
     tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in consistency are a "
                              "near-tie: the one next to the prediction is kept, flagged", low=0.01, high=1.0)
-    local_first: bool = param(True, "polish the prediction first; the CEM samples only when that answer does not "
-                              "stand (false: the CEM on every step, as the method alone)")
+    local_first: bool = param(True, "polish the prediction first (finely, then from afar); the CEM samples only "
+                              "when no answer stands (false: the CEM first on every step, as the method alone)")
 
     def __post_init__(self) -> None:
         validate(self)

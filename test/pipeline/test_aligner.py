@@ -110,6 +110,17 @@ def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_comp
         assert within(*step_error(poses, steps, k), 0.02, 0.1), k
 
 
+def test_a_wobbling_turn_beyond_the_fine_reach_stands_on_the_prediction_from_afar_without_the_cem(monkeypatch):
+    yaws = np.cumsum([0.0] + [0.12 * (-1) ** (k // 2) for k in range(9)])  # 7 deg turns, reversing every 2nd
+    poses = [make_transform(yaw=yaw, t=(0.4 * k, 0.05 * k, 0.0)) for k, yaw in enumerate(yaws)]
+    steps, events = sampled_and_competed(monkeypatch, ScanAligner(FAST), poses)
+    assert all(s.accepted for s in steps), [s.reason for s in steps]
+    # once the wobble is the prediction's usual error, its GICP basin stage lands on an answer covering the scan
+    assert events[4:] == [()] * 6 and all(s.origin == "prediction" for s in steps[4:])
+    for k in range(1, len(poses)):
+        assert within(*step_error(poses, steps, k), 0.02, 0.1), k
+
+
 def test_without_local_first_the_cem_samples_on_every_tracked_step(monkeypatch):
     config = dataclasses.replace(FAST, tracking=TrackingConfig(local_first=False))
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]

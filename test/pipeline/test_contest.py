@@ -92,8 +92,22 @@ def test_a_converged_polish_within_reach_of_the_prediction_stands_alone():
     assert answer is not None and answer.explained and c.standing() is answer and c.polishes == 1
 
 
-def test_an_answer_beyond_reach_needs_a_second_kind_of_start_within_the_spread():
-    c = contest(Basin(at(0.5), 0.8))
+def test_an_answer_beyond_reach_covering_the_scan_stands_alone_within_the_spread():
+    c = contest(Basin(at(0.5), 0.8, coverage=0.99))
+    cem = c.enter(at(0.45), Origin.CEM, wide=True)
+    assert cem is not None and not cem.explained and c.support(cem) == 1 and c.standing() is cem
+
+
+def test_an_answer_covering_the_scan_does_not_stand_beyond_the_spread_or_below_the_level():
+    far = contest(Basin(at(1.5), 0.8, coverage=0.99))
+    far.enter(at(1.4), Origin.CEM, wide=True)
+    weak = contest(Basin(at(0.5), 0.6, coverage=0.99))  # below health.confirm_ratio x the level 0.8
+    weak.enter(at(0.45), Origin.CEM, wide=True)
+    assert far.standing() is None and weak.standing() is None
+
+
+def test_an_answer_beyond_reach_leaving_part_of_the_scan_off_the_map_needs_a_second_kind_of_start():
+    c = contest(Basin(at(0.5), 0.8, coverage=0.9))
     cem = c.enter(at(0.45), Origin.CEM, wide=True)
     assert cem is not None and not cem.explained and c.standing() is None  # one start: it needs a rival
     assert c.enter(at(0.0), Origin.PREDICTION, wide=True) is None  # its basin is the CEM's answer: no new polish

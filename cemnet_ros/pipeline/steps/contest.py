@@ -11,9 +11,9 @@ right one in a regular building: a pose turned by 90 deg or shifted by a room fi
 truth, but leaves part of the scan in empty space.
 
 An answer **stands** (the scan needs no further start) when it has no failure, fits at ``health.confirm_ratio`` x
-the running level, and the prediction explains it: its polish converged within reach of the prediction, or two
-kinds of start reached it within the prediction's spread (``near``). An answer the prediction does not explain
-needs rivals.
+the running level, and the prediction explains it: its polish converged within reach of the prediction, or it
+lies within the prediction's spread (``near``) and either two kinds of start reached it or it covers the scan
+(``health.confirm_coverage``: the evidence a wrong basin lacks, above). Any other answer needs rivals.
 
 When none stands, the most consistent answer wins; distinct answers whose consistency falls short of the best
 one's by less than ``1 - tie_ratio`` of its fitness are a near-tie the scene cannot settle: the one next to the
@@ -110,7 +110,8 @@ class Contest:
         for answer in self.ranked():
             if answer.failures or level is None or self.judge.health.unconfirmed(answer.signals.fitness, 1):
                 continue
-            if answer.explained or (self.support(answer) >= 2 and self._near(answer)):
+            evidence = self.support(answer) >= 2 or self.judge.health.covers(answer.signals.coverage)
+            if answer.explained or (evidence and self._near(answer)):
                 answer.support = self.support(answer)
                 return answer
         return None

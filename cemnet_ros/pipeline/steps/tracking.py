@@ -1,18 +1,23 @@
 """Tracking (step 3 of the recipe in :mod:`..aligner`): the cheapest credible start first, stop once one stands.
 
-An answer stands when it is confirmed and the prediction explains it (:mod:`.contest`). The starts, in order:
+An answer stands when it is confirmed and the prediction explains it, or it covers the scan (:mod:`.contest`).
+The starts, in order:
 
 1. **the prediction**, finely polished against the map, when its recent errors lie within the polish's reach
    (the way a local method tracks; smooth motion ends here);
-2. **the CEM** around the prediction, in the engine's units (:mod:`.metric_cem`), against a sample of the map
+2. **the prediction from afar**, polished wide (:mod:`.polish`: GICP, then fine): a handheld turn's prediction
+   10-30 deg off usually lands in the truth's basin, and an answer that covers the scan stands;
+3. **the CEM** around the prediction, in the engine's units (:mod:`.metric_cem`), against a sample of the map
    near the predicted sensor position, with a spread that the recent prediction errors set
-   (:class:`~.adaptive.AdaptiveSpread`); its answer polished wide (:mod:`.polish`: GICP, then fine);
-3. **the prediction from afar**: its GICP stage, which on a handheld turn usually lands on the CEM's answer
-   (two kinds of start agree);
+   (:class:`~.adaptive.AdaptiveSpread`); its answer polished wide: it carries the steps the prediction cannot
+   bridge, or confirms an answer that leaves part of the scan off the map (two kinds of start agree);
 4. **the last pose from afar**; then the most consistent answer wins, near-ties go to the nearest.
+
+With ``tracking.local_first`` false the CEM comes first on every step (the method alone), then 2 and 4.
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import Optional
 
 import numpy as np
@@ -62,13 +67,12 @@ class Tracker:
         target = map_sample(cfg, frame, target_map, T_predicted, cfg.registration.n_points)
         if len(target) < cfg.preprocess.min_points:
             return self.judge.off_map(frame, T_predicted, "prediction", 0.0), contest
-        T_cem, spread_m = self._cem(frame, target, T_predicted, T_last, dt_ratio)
-        contest.enter(T_cem, Origin.CEM, wide=True, spread_m=spread_m)
-        if (answer := contest.standing()) is not None:
-            return answer, contest
-        contest.enter(T_predicted, Origin.PREDICTION, wide=True)
-        if (answer := contest.standing()) is not None:
-            return answer, contest
+        from_afar = (partial(contest.enter, T_predicted, Origin.PREDICTION, wide=True),
+                     partial(self._enter_cem, contest, target, T_predicted, T_last, dt_ratio))
+        for enter in from_afar if cfg.tracking.local_first else reversed(from_afar):
+            enter()
+            if (answer := contest.standing()) is not None:
+                return answer, contest
         if T_last is not None:
             contest.enter(T_last, Origin.LAST_POSE, wide=True)
         return contest.choose(cfg.tracking.tie_ratio), contest
@@ -96,6 +100,12 @@ class Tracker:
             return False
         typical = np.median(errors[:, 1] + polisher.frame.length * errors[:, 0]) * max(1.0, dt_ratio)
         return bool(typical <= polisher.reach)
+
+    def _enter_cem(self, contest: Contest, target: np.ndarray, T_predicted: np.ndarray,
+                   T_last: Optional[np.ndarray], dt_ratio: float) -> None:
+        """The CEM's answer (:meth:`_cem`) polished wide in ``contest``."""
+        T_cem, spread_m = self._cem(contest.polisher.frame, target, T_predicted, T_last, dt_ratio)
+        contest.enter(T_cem, Origin.CEM, wide=True, spread_m=spread_m)
 
     def _cem(self, frame: Frame, target: np.ndarray, T_predicted: np.ndarray, T_last: Optional[np.ndarray],
              dt_ratio: float) -> tuple[np.ndarray, float]:
