@@ -110,9 +110,10 @@ class Contest:
         for answer in self.ranked():
             if answer.failures or level is None or self.judge.health.unconfirmed(answer.signals.fitness, 1):
                 continue
-            evidence = self.support(answer) >= 2 or self.judge.health.covers(answer.signals.coverage)
+            support = self.support(answer)
+            evidence = support >= 2 or self.judge.health.covers(answer.signals.coverage)
             if answer.explained or (evidence and self._near(answer)):
-                answer.support = self.support(answer)
+                answer.support = support
                 return answer
         return None
 
