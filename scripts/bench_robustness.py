@@ -9,6 +9,8 @@ Sets (``--sets``; seeds are fixed and printed):
 * ``sequences``: ``--sequences`` courtyard drives of ``--seq-scans`` ticks at 10 Hz, 1-10 m/s, with dropouts,
   a stop-and-go, a 40 deg/s yaw swing and a kidnap (5-8 m, 30-90 deg).
 * ``corridor``: ``--corridor-scans`` scans at 1.5 m/s along a featureless corridor (x unobservable).
+* ``fast_gaps``: ``--fast-drives`` courtyard crossings at 15-25 m/s (10 Hz), each with one gap of 0.5-1 s in
+  which the car keeps its speed or brakes (up to 6 m/s^2).
 * ``speed``: the 6 KITTI scans played ping-pong for ``--speed-scans`` scans; median ms per scan.
 
 Every method sees the same points (float64, sensor frame). ``ScanAligner`` is used with default parameters;
@@ -55,10 +57,11 @@ def parse_args(argv: Optional[list[str]]) -> tuple[RobustnessConfig, Path]:
     parser.add_argument("--sequences", type=int, help=f"synthetic drives (default {FULL['sequences']})")
     parser.add_argument("--seq-scans", type=int, help=f"ticks per drive at 10 Hz (default {FULL['seq_scans']})")
     parser.add_argument("--corridor-scans", type=int, help=f"corridor scans (default {FULL['corridor_scans']})")
+    parser.add_argument("--fast-drives", type=int, help=f"fast_gaps drives (default {FULL['fast_drives']})")
     parser.add_argument("--speed-scans", type=int, help=f"KITTI ping-pong scans (default {FULL['speed_scans']})")
     parser.add_argument("--max-gap", type=int, help=f"kitti_gaps: largest g in (i, i+g) (default {FULL['max_gap']})")
     parser.add_argument("--seed", type=int, default=0, help="base seed (large_motion: seed, sequences: seed + 100 + k, "
-                                                             "corridor: seed + 200)")
+                                                             "corridor: seed + 200, fast_gaps: seed + 300 + k)")
     parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", dest="overrides",
                         help="node parameters of the pipeline under test, e.g. recovery.search.n_scatter=125 (a "
                         "value is read as YAML: numbers, lists, strings)")

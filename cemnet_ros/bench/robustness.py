@@ -3,7 +3,7 @@ seed) and returns a :class:`RobustnessReport` (markdown tables, JSON of every st
 
 Every method sees the same points (float64, sensor frame); exceptions are caught per step and counted as
 failures with their message. Seeds are fixed: large_motion ``seed``, sequences ``seed + 100 + k``, corridor
-``seed + 200``.
+``seed + 200``, fast_gaps ``seed + 300 + k``.
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from typing import Any, Callable, Optional
 
 from cemnet_ros.bench.corridor import CORRIDOR_MAX_SCANS, run_corridor
 from cemnet_ros.bench.drives import MIN_SEQ_TICKS
+from cemnet_ros.bench.fast_gaps import run_fast_gaps
 from cemnet_ros.bench.odometry import METHODS, available_methods
 from cemnet_ros.bench.pairs import kitti_pairs, large_motion_pairs, run_pairs
 from cemnet_ros.bench.sequences import run_sequences
@@ -26,10 +27,12 @@ from cemnet_ros.data.shared import SHARED
 from cemnet_ros.io.console import log
 from cemnet_ros.io.report import Report
 
-SETS = ("kitti_gaps", "large_motion", "sequences", "corridor", "speed")
+SETS = ("kitti_gaps", "large_motion", "sequences", "corridor", "fast_gaps", "speed")
 KITTI_SETS = ("kitti_gaps", "speed")
-FULL = {"pairs": 40, "sequences": 3, "seq_scans": 100, "corridor_scans": 60, "speed_scans": 60, "max_gap": 5}
-QUICK = {"pairs": 3, "sequences": 1, "seq_scans": 60, "corridor_scans": 12, "speed_scans": 10, "max_gap": 1}
+FULL = {"pairs": 40, "sequences": 3, "seq_scans": 100, "corridor_scans": 60, "fast_drives": 8, "speed_scans": 60,
+        "max_gap": 5}
+QUICK = {"pairs": 3, "sequences": 1, "seq_scans": 60, "corridor_scans": 12, "fast_drives": 1, "speed_scans": 10,
+         "max_gap": 1}
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,7 @@ class RobustnessConfig:
     sequences: int = FULL["sequences"]  # synthetic drives
     seq_scans: int = FULL["seq_scans"]  # ticks per drive at 10 Hz
     corridor_scans: int = FULL["corridor_scans"]
+    fast_drives: int = FULL["fast_drives"]  # fast_gaps drives
     speed_scans: int = FULL["speed_scans"]  # KITTI ping-pong scans
     max_gap: int = FULL["max_gap"]  # kitti_gaps: largest g in (i, i + g)
     seed: int = 0
@@ -66,7 +70,7 @@ class RobustnessConfig:
 
     def seeds(self) -> dict[str, Any]:
         return {"large_motion": self.seed, "sequences": [self.seed + 100 + k for k in range(self.sequences)],
-                "corridor": self.seed + 200}
+                "corridor": self.seed + 200, "fast_gaps": [self.seed + 300 + k for k in range(self.fast_drives)]}
 
 
 @dataclass
@@ -105,6 +109,8 @@ def run_set(name: str, config: RobustnessConfig, methods: dict[str, Callable]) -
         return run_sequences(config.sequences, config.seq_scans, config.seed + 100, methods)
     if name == "corridor":
         return run_corridor(config.corridor_scans, config.seed + 200, methods)
+    if name == "fast_gaps":
+        return run_fast_gaps(config.fast_drives, config.seed + 300, methods)
     return run_speed(config.kitti, config.speed_scans, methods)
 
 

@@ -112,6 +112,18 @@ def corridor_table(data: dict) -> str:
     return "\n".join(lines)
 
 
+def fast_gaps_table(data: dict) -> str:
+    """Per method: the drives' ATE (median, worst), how many held within the precise tolerance, steps flagged."""
+    lines = [f"| method | drives | ATE med (m) | ATE max (m) | ATE < {PRECISE_M} m | flagged steps |",
+             "|---|---|---|---|---|---|"]
+    for name, r in data.items():
+        ates = [d["ate_m"] for d in r["drives"] if d["ate_m"] is not None]
+        held = sum(a < PRECISE_M for a in ates)
+        lines.append(f"| {name} | {len(r['drives'])} | {_f(float(np.median(ates)) if ates else None)} | "
+                     f"{_f(max(ates) if ates else None)} | {held} | {sum(d['flagged'] for d in r['drives'])} |")
+    return "\n".join(lines)
+
+
 def speed_table(data: dict) -> str:
     """ms per scan of each method on the KITTI ping-pong stream, and the ratio."""
     lines = [f"KITTI {data['points_mean']} points/scan, {data['scans']} scans, first {data['warmup']} excluded",
@@ -134,6 +146,8 @@ def report_markdown(results: dict) -> str:
         parts.append("Sequences (recovered/resumed of events):\n" + sequence_table(results["sequences"]))
     if "corridor" in results:
         parts.append("Corridor:\n" + corridor_table(results["corridor"]))
+    if "fast_gaps" in results:
+        parts.append("Fast gaps (a car at 15-25 m/s, one gap of 0.5-1 s):\n" + fast_gaps_table(results["fast_gaps"]))
     if "speed" in results:
         parts.append("Speed:\n" + speed_table(results["speed"]))
     return "\n\n".join(parts + [DEFINITIONS])

@@ -13,12 +13,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cemnet_ros.bench.drives import make_drive
+from cemnet_ros.bench.fast_gaps import GAPS, LEAD_TICKS, fast_drive
 from cemnet_ros.bench.metrics import accepted_wrong, ate_first_pose, end_drift_percent, relative_error, summarize
 from cemnet_ros.bench.pairs import Pair, pair_record
 from cemnet_ros.bench.robustness import QUICK, RobustnessConfig, run
 from cemnet_ros.bench.sequences import event_outcome
 from cemnet_ros.bench.speed import ping_pong
 from cemnet_ros.bench.streams import Scan, run_stream, step_records
+from cemnet_ros.bench.tables import fast_gaps_table
 from cemnet_ros.data.scenes import COURTYARD_BOUNDS, courtyard_scene, in_free_space
 
 
@@ -137,6 +139,28 @@ def test_drive_has_its_events_and_stays_in_free_space():
     assert jump > 4.0
     assert len(drive.delivered) < 60 and 0 in drive.delivered
     assert in_free_space(courtyard_scene(), np.array([p[:3, 3] for p in drive.poses]), COURTYARD_BOUNDS)
+
+
+def test_fast_drive_skips_its_gap_keeps_to_the_lane_and_brakes_only_in_the_gap():
+    for seed in range(6):
+        poses, delivered, draw = fast_drive(np.random.default_rng(seed))
+        skipped = sorted(set(range(len(poses))) - set(delivered))
+        assert skipped == list(range(LEAD_TICKS, LEAD_TICKS + len(skipped)))
+        assert GAPS[0] - 1e-9 <= len(skipped) * 0.1 <= GAPS[1] + 1e-9
+        x = np.array([p[0, 3] for p in poses])
+        speeds = np.diff(x) / 0.1
+        assert speeds[0] == pytest.approx(draw["speed_mps"])
+        assert np.all(np.diff(speeds[: LEAD_TICKS + 1]) == pytest.approx(0.0))  # steady before the gap
+        after = speeds[LEAD_TICKS + len(skipped):]
+        assert np.all(np.diff(after) == pytest.approx(0.0))  # and after it, at the speed it braked to
+        assert after[0] == pytest.approx(max(draw["speed_mps"] - draw["brake_mps2"] * len(skipped) * 0.1, 1.0))
+        assert in_free_space(courtyard_scene(), np.array([p[:3, 3] for p in poses]), COURTYARD_BOUNDS, margin=0.5)
+
+
+def test_fast_gaps_table_counts_the_drives_that_held():
+    data = {"m": {"drives": [{"ate_m": 0.01, "flagged": 0}, {"ate_m": 2.0, "flagged": 3}, {"ate_m": None,
+                                                                                          "flagged": 5}]}}
+    assert fast_gaps_table(data).splitlines()[-1] == "| m | 3 | 1.005 | 2.000 | 1 | 8 |"
 
 
 def test_large_motion_end_to_end():

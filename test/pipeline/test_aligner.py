@@ -187,6 +187,17 @@ def test_a_stamp_gap_is_tracked_when_it_fits_and_searched_when_it_does_not():
     assert within(*step_error(poses, steps, 4), 0.05, 0.2)
 
 
+def test_a_car_that_keeps_its_speed_through_a_gap_of_a_second_is_tracked_from_the_prediction():
+    config = dataclasses.replace(FAST, recovery=dataclasses.replace(FAST.recovery, radius=3.0))
+    aligner = ScanAligner(config)
+    poses = [make_transform(t=(-10.0 + k, 0.0, 0.0)) for k in range(4)]  # 10 m/s at 10 Hz
+    poses.append(make_transform(t=(8.0, 0.0, 0.0)))  # 1.5 s later: 15 m on
+    stamps = [k * PERIOD for k in range(4)] + [18 * PERIOD]
+    steps = drive(aligner, poses, stamps=stamps)
+    assert not steps[4].recovered and steps[4].accepted, steps[4].reason
+    assert within(*step_error(poses, steps, 4), 0.03, 0.15)
+
+
 def test_a_request_triggers_the_global_search():
     aligner = ScanAligner(FAST)
     drive(aligner, [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(3)])

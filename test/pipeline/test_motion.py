@@ -16,6 +16,7 @@ def test_constant_velocity_repeats_and_rescales_the_last_motion():
     np.testing.assert_allclose(model.predict_relative(200), step, atol=1e-9)
     np.testing.assert_allclose(model.predict(200), step @ step, atol=1e-9)
     np.testing.assert_allclose(model.predict_relative(300), step @ step, atol=1e-9)  # a dropped scan
+    np.testing.assert_allclose(model.predict_relative(1300), np.linalg.matrix_power(step, 12), atol=1e-9)  # a gap
     half = se3_power(step, 0.5)
     np.testing.assert_allclose(half @ half, step, atol=1e-9)
 

@@ -1,8 +1,10 @@
 """Constant-velocity motion model on SE(3) (as KISS-ICP): the next motion repeats the last one.
 
 The last relative motion is rescaled to the new time step through the SE(3) logarithm, so a dropped scan
-(twice the usual gap) predicts twice the motion. The model also owns the time: its last stamp, the usual time
-step (a running mean) that widens the tracking's search after a longer one, and the velocity that deskews.
+(twice the usual gap) predicts twice the motion, and a gap of a second at 10 Hz ten times it: a car keeps its
+speed through a gap more often than not, and where it stopped tracking's start from the last pose finds it
+(:mod:`.tracking`). The model also owns the time: its last stamp, the usual time step (a running mean) that
+widens the tracking's search after a longer one, and the velocity that deskews.
 """
 from __future__ import annotations
 
@@ -25,8 +27,7 @@ def se3_power(transform: np.ndarray, ratio: float) -> np.ndarray:
 class ConstantVelocity:
     """Predicts the next pose from the last two (pose_{k-1} @ (T_{k-2,k-1}) ** (dt_k / dt_{k-1}))."""
 
-    def __init__(self, max_ratio: float = 5.0) -> None:
-        self.max_ratio = max_ratio
+    def __init__(self) -> None:
         self.reset()
 
     def reset(self) -> None:
@@ -81,7 +82,7 @@ class ConstantVelocity:
         delta = np.linalg.inv(self._poses[0]) @ self._poses[1]
         last_dt = self._stamps[1] - self._stamps[0]
         ratio = 1.0 if last_dt <= 0 else (int(stamp_ns) - self._stamps[1]) / last_dt
-        return se3_power(delta, float(np.clip(ratio, 0.0, self.max_ratio)))
+        return se3_power(delta, max(0.0, float(ratio)))
 
     def predict(self, stamp_ns: int) -> np.ndarray:
         """Predicted pose at ``stamp_ns`` (identity before any update)."""
