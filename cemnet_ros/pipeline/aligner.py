@@ -18,7 +18,8 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    metres of translation), each hypothesis polished from afar and competing with tracking's answers (steps 3
    and 5 are one routine, :mod:`.steps.track_then_recover`, that pair mode registers with too);
 6. **commit**: a good step moves the pose, the map, the motion model and the adaptive spread; a failed one is
-   published flagged with the prediction and changes nothing else; a degenerate one keeps the prediction along
+   published flagged with the prediction and changes nothing else (too many in a row restart the map, where
+   :mod:`.steps.lost_streak` says); a degenerate one keeps the prediction along
    the unconstrained directions, is flagged, and still extends the map; one chosen among near-ties is flagged
    and moves the pose only. The step's covariance is its registration's plus the previous pose's error against
    the map (:func:`~.steps.covariance.carried_into_step`).
@@ -46,6 +47,7 @@ from cemnet_ros.pipeline.steps.covariance import carried_into_step
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
 from cemnet_ros.pipeline.steps.health import HealthMonitor
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
+from cemnet_ros.pipeline.steps.lost_streak import LostStreak
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
 from cemnet_ros.pipeline.steps.recovery import Recovery, prior_registrar
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
@@ -69,6 +71,7 @@ class ScanAligner:
         self._motion = ConstantVelocity()
         self._spread = AdaptiveSpread(self.config.adaptive)
         self._health = HealthMonitor(self.config.health)
+        self._lost = LostStreak()
         judge = StepJudge(self.config, self._health)
         recovery = Recovery(self.config, judge, prior_registrar(self.config, recovery_prior))
         self._registration = TrackThenRecover(Tracker(self.config, registrar, self._spread, judge), recovery)
@@ -108,6 +111,7 @@ class ScanAligner:
         self._pose = np.eye(4) if T_odom_sensor is None else np.asarray(T_odom_sensor, dtype=np.float64).copy()
         self._pending_recovery = ""  # why the next scan runs the global search ("" = it tracks)
         self._failures_in_a_row = 0
+        self._lost.reset()
         self._T_odom_last_insert: Optional[np.ndarray] = None  # where the map last grew (a recovery's fallback)
         self._pose_vs_map = np.zeros((6, 6))  # covariance of the pose's error against the map (ROS order)
         self._sweep.reset()
@@ -184,6 +188,7 @@ class ScanAligner:
         self._health.reset()
         self._pending_recovery = ""
         self._failures_in_a_row = 0
+        self._lost.reset()
 
     def _commit(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, registered: Registered,
                 start: float) -> AlignmentStep:
@@ -191,7 +196,7 @@ class ScanAligner:
         estimate, previous = registered.estimate, self._pose
         carried = self._carried(estimate, T_predicted)
         if estimate.failures:
-            pose, reasons = T_predicted, self._failed(frame, T_predicted, estimate)
+            pose, reasons = self._failed(frame, stamp_ns, T_predicted, estimate)
         else:
             pose, reasons = estimate.T_odom_sensor, list(estimate.notes)
             self._extend(frame, pose, T_predicted, estimate)
@@ -211,15 +216,21 @@ class ScanAligner:
         self._pose_vs_map = estimate.published_covariance(self.config.health.covariance_inflation)
         return carried
 
-    def _failed(self, frame: Frame, T_predicted: np.ndarray, estimate: Estimate) -> list[str]:
-        """A step that cannot be vouched for: the next scan recovers; too many in a row restart the map."""
+    def _failed(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, estimate: Estimate
+                ) -> tuple[np.ndarray, list[str]]:
+        """A step that cannot be vouched for, flagged (the pose published and the reasons): the prediction, and
+        the next scan recovers; too many in a row restart the map from this scan, where :class:`.LostStreak`
+        says."""
         self._failures_in_a_row += 1
         self._pending_recovery = "the previous step failed"
-        reasons = [*estimate.failures, "motion prediction used"]
-        if self._failures_in_a_row >= self.config.recovery.restart_after:
-            reasons.append(f"lost for {self._failures_in_a_row} scans: the map restarts from this scan")
-            self._restart_map(self._preprocessor.rescaled_if_lost(frame), T_predicted)
-        return reasons
+        overlaps = self._health.overlaps(estimate.signals.fitness)
+        self._lost.failed(estimate.T_odom_sensor if overlaps else None, stamp_ns)
+        if self._failures_in_a_row < self.config.recovery.restart_after:
+            return T_predicted, [*estimate.failures, "motion prediction used"]
+        pose, where = self._lost.restart_pose(T_predicted)
+        self._restart_map(self._preprocessor.rescaled_if_lost(frame), pose)
+        return pose, [*estimate.failures, where,
+                      f"lost for {self.config.recovery.restart_after} scans: the map restarts from this scan"]
 
     def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, estimate: Estimate) -> None:
         """A good (or degenerate) step: the map, the fitness level and the prediction errors take it in; a pose
@@ -227,6 +238,7 @@ class ScanAligner:
         assert self._map is not None  # a step is only committed against the map it was registered on
         self._pending_recovery = ""
         self._failures_in_a_row = 0
+        self._lost.reset()
         if estimate.tied:
             return
         if not estimate.recovered:  # a recovery's guess was no prediction of the motion model

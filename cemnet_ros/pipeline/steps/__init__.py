@@ -5,7 +5,8 @@ grid, subsets), ``sweep`` and ``deskew`` (motion compensation); **predict** ``mo
 ``adaptive`` (how far to search); **track** ``tracking`` (the order of the starts), ``contest`` (polish a start,
 judge it, does it stand, choose), ``polish`` (fine, basin, wide: ``refine`` the point-to-plane ICP, ``basin`` the
 GICP stage) and ``metric_cem`` (the engine in metres); **judge** ``verdict``, ``health`` (failure signals) and
-``covariance`` (from the polish's Hessian); **recover** ``recovery`` (the global search);
+``covariance`` (from the polish's Hessian); **recover** ``recovery`` (the global search); **commit**
+``lost_streak`` (where a lost map restarts);
 ``track_then_recover`` registers a frame (track, then recover when tracking doubts its answer). Import
 from the modules; this package stays import-light (no torch: ``recovery`` imports it, the ROS layer does not).
 """

@@ -70,7 +70,7 @@ class HealthMonitor:
         compete (:mod:`.contest`); a wrong answer shows in its fitness or loses to a more consistent one.
         """
         c, s, out = self.config, signals, []
-        if s.fitness < c.min_fitness:
+        if not self.overlaps(s.fitness):
             out.append(f"low fitness {s.fitness:.3f} < {c.min_fitness:.3f}")
         elif self.level is not None and s.fitness < c.fitness_drop * self.level:
             out.append(f"fitness {s.fitness:.3f} fell below {c.fitness_drop:.2f} x its running level {self.level:.3f}")
@@ -86,6 +86,10 @@ class HealthMonitor:
             return ""
         alone = "after a stamp gap" if after_gap else "reached from one start only"
         return f"unconfirmed: fitness {fitness:.3f} < {floor:.3f}, {alone}"
+
+    def overlaps(self, fitness: float) -> bool:
+        """Enough of the scan lies on the map's surfaces to be evidence at all (``health.min_fitness``)."""
+        return fitness >= self.config.min_fitness
 
     def covers(self, coverage: float) -> bool:
         """Nearly all of the scan lands next to the map's surfaces (``health.confirm_coverage``)."""
