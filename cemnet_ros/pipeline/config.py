@@ -93,6 +93,11 @@ class HealthConfig:
     min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
                                     "below which a step is degenerate (flagged, prediction kept along the free "
                                     "direction)", low=0.0, high=0.99)
+    neighbour_conditioning: float = param(0.02, "an accepted step whose conditioning is below this (a weakly "
+                                          "constrained view: a narrow field of view down a corridor) is polished "
+                                          "again from its rotational neighbours: a neighbour that fits about as "
+                                          "well flags it, one that fits clearly better replaces it; 0 = never",
+                                          low=0.0, high=1.0)
     covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
 
     def __post_init__(self) -> None:

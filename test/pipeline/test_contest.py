@@ -8,12 +8,13 @@ from street_scene import make_transform
 
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.contest import Contest, Origin, distinct
-from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals
+from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals, disagreement
 from cemnet_ros.pipeline.steps.refine import PolishResult
 from cemnet_ros.pipeline.steps.verdict import Estimate
 
 ITERS = 20
 REACH = 0.2  # m: the fake fine polish's pairing distance
+LENGTH = 10.0  # m: the lever arm that makes a rotation a distance (the fake frame's RMS range)
 
 
 @dataclass
@@ -27,13 +28,18 @@ class Landscape:
     """A fake Polisher: the fine polish settles in the basin within REACH of its start (converged), else stays
     (its budget spent); the basin stage (GICP) finds any basin within 2 m."""
 
-    def __init__(self, *basins: Basin) -> None:
-        self.basins = list(basins)
+    def __init__(self, *basins: Basin, conditioning: float = 1.0) -> None:
+        self.basins, self.conditioning = list(basins), conditioning
         self.frame, self.map, self.effort, self.iters, self.reach = None, None, 1.0, ITERS, REACH
+        self.reach_rad = REACH / LENGTH
 
     def _nearest(self, T: np.ndarray, radius: float):
-        near = [b for b in self.basins if np.linalg.norm(b.pose[:3, 3] - T[:3, 3]) <= radius]
-        return min(near, key=lambda b: np.linalg.norm(b.pose[:3, 3] - T[:3, 3])) if near else None
+        def apart(b: Basin) -> float:
+            metres, radians = disagreement(b.pose, T)
+            return metres + LENGTH * radians
+
+        near = [b for b in self.basins if apart(b) <= radius]
+        return min(near, key=apart) if near else None
 
     def fine(self, T_start: np.ndarray) -> PolishResult:
         basin = self._nearest(T_start, REACH)
@@ -67,7 +73,8 @@ class Judge:
     def judge(self, frame, target_map, T_predicted, T_start, polish, spread_m, recovered, prediction_std, origin):
         fitness = self.landscape.fitness(polish.T_target_source)
         failures = [] if fitness >= 0.3 else ["low fitness"]
-        signals = Signals(fitness, 0.0, 0.0, 1.0, 0.0, coverage=self.landscape.coverage(polish.T_target_source))
+        signals = Signals(fitness, 0.0, 0.0, self.landscape.conditioning, 0.0,
+                          coverage=self.landscape.coverage(polish.T_target_source))
         return Estimate(polish.T_target_source, np.eye(6), signals, failures, [],
                         recovered, np.zeros((6, 0)), 10.0, origin)
 
@@ -76,8 +83,8 @@ def at(x: float, yaw_deg: float = 0.0) -> np.ndarray:
     return make_transform(yaw=np.radians(yaw_deg), t=(x, 0.0, 0.0))
 
 
-def contest(*basins: Basin, near=(0.6, 0.2)) -> Contest:
-    landscape = Landscape(*basins)
+def contest(*basins: Basin, near=(0.6, 0.2), conditioning: float = 1.0) -> Contest:
+    landscape = Landscape(*basins, conditioning=conditioning)
     return Contest(landscape, Judge(landscape), at(0.0), near, prediction_std=0.1)  # type: ignore[arg-type]
 
 
@@ -188,3 +195,22 @@ def test_near_ties_none_next_to_the_prediction_fail_as_ambiguous():
     c.enter(at(-1.4), Origin.LAST_POSE, wide=True)
     chosen = c.choose(0.95)
     assert chosen.failures and "ambiguous" in chosen.failures[-1]
+
+
+def test_an_accepted_answer_on_a_weak_view_is_checked_against_its_rotational_neighbours():
+    """Basins 1.5 deg apart in yaw (within two fine reaches, 1.15 deg here): a neighbour about as consistent flags
+    the answer, a clearly better one replaces it, a worse one or a well constrained view changes nothing."""
+    def checked(neighbour_fitness: float, conditioning: float = 0.01):
+        c = contest(Basin(at(0.0), 0.8), Basin(at(0.0, 1.5), neighbour_fitness), conditioning=conditioning)
+        answer = c.enter(at(0.0), Origin.PREDICTION)
+        assert answer is not None and answer.accepted
+        return answer, c.checked_against_neighbours(answer, 0.95), c
+
+    answer, out, c = checked(0.79)
+    assert out is answer and out.tied and not out.accepted and "neighbour" in out.notes[0] and c.polishes == 3
+    answer, out, _ = checked(0.9)
+    assert np.allclose(out.T_odom_sensor, at(0.0, 1.5)) and out.accepted and out.origin == "neighbour"
+    answer, out, _ = checked(0.6)
+    assert out is answer and out.accepted
+    answer, out, c = checked(0.79, conditioning=0.5)  # above health.neighbour_conditioning: not checked
+    assert out is answer and out.accepted and c.polishes == 1

@@ -8,17 +8,29 @@ import numpy as np
 from cemnet_ros.pipeline.steps.track_then_recover import RecoveryFallbacks, TrackThenRecover
 
 
+class FakeContest:
+    """Records the neighbour check, which passes every answer through."""
+
+    def __init__(self, name):
+        self.name, self.checked = name, []
+
+    def checked_against_neighbours(self, answer, tie_ratio):
+        self.checked.append((answer.name, tie_ratio))
+        return answer
+
+
 class FakeTracker:
     def __init__(self, doubts):
         self._doubts, self.calls = doubts, []
+        self.config = SimpleNamespace(tracking=SimpleNamespace(tie_ratio=0.9))
 
     def contest(self, frame, target_map, T_predicted, dt_ratio=1.0, effort=1.0):
         self.calls.append(("contest", dt_ratio, effort))
-        return SimpleNamespace(name="empty contest")
+        return FakeContest("empty contest")
 
     def track(self, frame, target_map, T_predicted, dt_ratio, T_last, effort=1.0):
         self.calls.append(("track", dt_ratio, T_last, effort))
-        return SimpleNamespace(name="tracked"), SimpleNamespace(name="tracking's contest")
+        return SimpleNamespace(name="tracked"), FakeContest("tracking's contest")
 
     def doubts(self, estimate, after_gap=False):
         self.calls.append(("doubts", after_gap))
@@ -45,6 +57,7 @@ def test_an_answer_without_doubts_stands_without_the_search():
     assert (registered.estimate.name, registered.contest.name, registered.why_recovered) == (
         "tracked", "tracking's contest", "")
     assert tracked == [("track", 2.0, "last", 0.5), ("doubts", True)] and recovered == []
+    assert registered.contest.checked == [("tracked", 0.9)]  # the answer met the neighbour check
 
 
 def test_doubts_make_the_search_compete_in_trackings_contest():
@@ -53,6 +66,7 @@ def test_doubts_make_the_search_compete_in_trackings_contest():
     assert registered.estimate.name == "recovered" and registered.contest.name == "tracking's contest"
     assert registered.why_recovered == "tracking failed (fitness 0.1 < 0.3; unconfirmed)"
     assert recovered == [("tracking's contest", "map grew here", "last pose")]
+    assert registered.contest.checked == [("recovered", 0.9)]  # the recovery's answer, not tracking's
 
 
 def test_a_reason_given_runs_the_search_without_tracking():

@@ -15,6 +15,12 @@ the running level, and the prediction explains it: its polish converged within r
 lies within the prediction's spread (``near``) and either two kinds of start reached it or it covers the scan
 (``health.confirm_coverage``: the evidence a wrong basin lacks, above). Any other answer needs rivals.
 
+An accepted answer on a weakly constrained view (conditioning below ``health.neighbour_conditioning``: a narrow
+field of view, where the polish stops anywhere along a flat valley) is **checked against its neighbours**
+(:meth:`Contest.checked_against_neighbours`): polished again from its pose turned by the fine polish's reach
+either way about the sensor's z axis; a distinct neighbour about as consistent flags it (a near-tie), a clearly
+more consistent one replaces it.
+
 When none stands, the most consistent answer wins; distinct answers whose consistency falls short of the best
 one's by less than ``1 - tie_ratio`` of its fitness are a near-tie the scene cannot settle: the one next to the
 prediction is kept and flagged (a symmetric scene; the map does not take it in), and when none is next to it the
@@ -29,6 +35,7 @@ from typing import Optional
 
 import numpy as np
 
+from cemnet_ros.core.geometry import euler_to_matrix_np
 from cemnet_ros.pipeline.steps.health import disagreement
 from cemnet_ros.pipeline.steps.polish import Polisher
 from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
@@ -44,6 +51,7 @@ class Origin(str, enum.Enum):
     LAST_POSE = "last pose"  # the sensor did not move as it did (a stop, a jerk, a turn reversed)
     SEARCH = "search"  # a hypothesis of the global search
     TURN = "turn"  # the last pose turned by a few tens of degrees (the recovery's grid of turns)
+    NEIGHBOUR = "neighbour"  # an answer turned by the fine polish's reach either way (its basin checked)
 
 
 def distinct(T_a: np.ndarray, T_b: np.ndarray) -> bool:
@@ -140,6 +148,32 @@ class Contest:
             return nearest
         best.failures.append(f"ambiguous: {summary}, none next to the motion prediction")
         return best
+
+    def checked_against_neighbours(self, answer: Estimate, tie_ratio: float) -> Estimate:
+        """``answer``, or the neighbour that replaces it, after the neighbour check (see the module) when it is
+        accepted on a weakly constrained view; a near-tie in consistency (within ``1 - tie_ratio`` of its
+        fitness) flags it as a symmetric scene does."""
+        if not answer.accepted or answer.signals.conditioning >= self.judge.health.config.neighbour_conditioning:
+            return answer
+        for sign in (1.0, -1.0):
+            T_turned = answer.T_odom_sensor.copy()
+            T_turned[:3, :3] = T_turned[:3, :3] @ euler_to_matrix_np(np.array([sign * self.polisher.reach_rad,
+                                                                                0.0, 0.0]))
+            self.enter(T_turned, Origin.NEIGHBOUR)
+        rivals = [a for a in self.answers if a.origin == Origin.NEIGHBOUR.value and not a.failures
+                  and distinct(a.T_odom_sensor, answer.T_odom_sensor)]
+        if not rivals:
+            return answer
+        best = max(rivals, key=lambda a: a.signals.consistency)
+        margin = (1.0 - tie_ratio) * answer.signals.fitness
+        if best.signals.consistency > answer.signals.consistency + margin:
+            best.support = self.support(best)
+            return best
+        if best.signals.consistency >= answer.signals.consistency - margin:
+            metres, radians = disagreement(answer.T_odom_sensor, best.T_odom_sensor)
+            answer.notes.append(f"a neighbour {metres:.2f} m / {np.degrees(radians):.1f} deg away fits as well")
+            answer.tied = True
+        return answer
 
     def ranked(self) -> list[Estimate]:
         """The answers, most consistent first."""

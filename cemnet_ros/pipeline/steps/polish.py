@@ -50,6 +50,12 @@ class Polisher:
         """The fine polish's pairing distance (m)."""
         return FINE_DISTANCE * self.frame.polish_voxel
 
+    @property
+    def reach_rad(self) -> float:
+        """The rotation (rad) that moves a point at the RMS range by :attr:`reach`: about the spacing of the fine
+        polish's rotational basins."""
+        return self.reach / self.frame.length
+
     def fine(self, T_start: np.ndarray) -> PolishResult:
         """Point to plane from ``T_start`` with every polish point, pairs within :attr:`reach`."""
         return point_to_plane_icp(self.map, self.frame.polish, T_start, self.reach, self.iters,

@@ -1,5 +1,6 @@
 """Registering one frame (steps 3 and 5 of the recipe in :mod:`..aligner`): track from the prediction, then
-recover with the global search when tracking's answer cannot stand alone, or at once when the caller says why.
+recover with the global search when tracking's answer cannot stand alone, or at once when the caller says why;
+the answer on a weakly constrained view is checked against its neighbours (:mod:`.contest`).
 
 Sequential mode (:mod:`..aligner`) and pair mode (:mod:`..pair_mode`) register through it alike; what they
 commit differs.
@@ -62,7 +63,11 @@ class TrackThenRecover:
             estimate, contest = self.tracker.track(frame, target_map, T_predicted, dt_ratio, T_last, effort)
             doubts = self.tracker.doubts(estimate, after_gap=after_gap)
             if not doubts:
-                return Registered(estimate, contest)
+                return Registered(self._checked(estimate, contest), contest)
             why = "tracking failed (" + "; ".join(doubts) + ")"
         estimate = self.recovery.recover(frame, target_map, contest, fallbacks.T_fallback, fallbacks.T_last)
-        return Registered(estimate, contest, why)
+        return Registered(self._checked(estimate, contest), contest, why)
+
+    def _checked(self, estimate: Estimate, contest: Contest) -> Estimate:
+        """The answer after the neighbour check (:meth:`~.contest.Contest.checked_against_neighbours`)."""
+        return contest.checked_against_neighbours(estimate, self.tracker.config.tracking.tie_ratio)
