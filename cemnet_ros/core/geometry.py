@@ -27,6 +27,13 @@ def euler_to_matrix_np(angles: np.ndarray) -> np.ndarray:
     return np.stack(rows, -1).reshape(*angles.shape[:-1], 3, 3)
 
 
+def turned_in_place(T_pose: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """A copy of the 4x4 ``T_pose`` rotated about its own origin and axes by the angles [z, y, x] (rad)."""
+    out = np.array(T_pose, dtype=np.float64)
+    out[:3, :3] = out[:3, :3] @ euler_to_matrix_np(angles)
+    return out
+
+
 def matrix_to_euler_np(rotation: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotation matrices -> (..., 3) angles [z, y, x] (twin of ``matrix_to_euler``)."""
     rotation = np.asarray(rotation, dtype=np.float64)

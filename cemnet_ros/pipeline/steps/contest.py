@@ -35,7 +35,7 @@ from typing import Optional
 
 import numpy as np
 
-from cemnet_ros.core.geometry import euler_to_matrix_np
+from cemnet_ros.core.geometry import turned_in_place
 from cemnet_ros.pipeline.steps.health import disagreement
 from cemnet_ros.pipeline.steps.polish import Polisher
 from cemnet_ros.pipeline.steps.verdict import Estimate, StepJudge
@@ -156,10 +156,8 @@ class Contest:
         if not answer.accepted or answer.signals.conditioning >= self.judge.health.config.neighbour_conditioning:
             return answer
         for sign in (1.0, -1.0):
-            T_turned = answer.T_odom_sensor.copy()
-            T_turned[:3, :3] = T_turned[:3, :3] @ euler_to_matrix_np(np.array([sign * self.polisher.reach_rad,
-                                                                                0.0, 0.0]))
-            self.enter(T_turned, Origin.NEIGHBOUR)
+            self.enter(turned_in_place(answer.T_odom_sensor, np.array([sign * self.polisher.reach_rad, 0.0, 0.0])),
+                       Origin.NEIGHBOUR)
         rivals = [a for a in self.answers if a.origin == Origin.NEIGHBOUR.value and not a.failures
                   and distinct(a.T_odom_sensor, answer.T_odom_sensor)]
         if not rivals:

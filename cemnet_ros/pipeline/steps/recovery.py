@@ -20,7 +20,7 @@ import torch
 
 from cemnet_ros.core import Registrar, RegistrationConfig
 from cemnet_ros.core.config import GlobalSearchConfig
-from cemnet_ros.core.geometry import apply_transform, euler_to_matrix_np
+from cemnet_ros.core.geometry import apply_transform, turned_in_place
 from cemnet_ros.core.global_search import SearchPrior, global_search
 from cemnet_ros.core.registration import NETWORK_MIN_POINTS
 from cemnet_ros.pipeline.config import AlignerConfig, RecoveryConfig
@@ -69,9 +69,7 @@ def turns(T_pose: np.ndarray, config: RecoveryConfig) -> list[np.ndarray]:
         for pitch, roll in tilts:
             if yaw == 0.0 and pitch == 0.0 and roll == 0.0:
                 continue
-            T_turned = T_pose.copy()
-            T_turned[:3, :3] = T_pose[:3, :3] @ euler_to_matrix_np(np.array([yaw, pitch, roll]))
-            out.append(T_turned)
+            out.append(turned_in_place(T_pose, np.array([yaw, pitch, roll])))
     return out
 
 
