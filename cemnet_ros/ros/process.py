@@ -14,7 +14,7 @@ from cemnet_ros.ros.parameters import ConfigError
 
 def run(make_node: Callable[[], Any], name: str, args: Optional[list] = None) -> None:
     """Spin ``make_node()`` until SIGINT or its ``fatal_error``; a fatal configuration or engine error is one line
-    on stderr (``<name>: error: ...``) and exit status 2."""
+    on stderr (``<name>: error: ...``) and exit status 2. A SIGINT at any point ends it with status 0."""
     rclpy.init(args=args)
     node, error = None, None
     try:
@@ -28,6 +28,11 @@ def run(make_node: Callable[[], Any], name: str, args: Optional[list] = None) ->
         error = str(exc).splitlines()[0]
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if node is not None or rclpy.ok():
+            raise
+        # A Ctrl-C between rclpy.init and a made node: rclpy's handler shut the context down, so making the node
+        # failed ("the given context is not valid"). Nothing was started: it ends as a Ctrl-C does.
     finally:
         _ignore_interrupts()
         if node is not None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
 import sys
 import time
 
@@ -37,6 +38,37 @@ def test_sigint_while_the_console_script_still_imports_ends_it_with_status_0_and
         node.send_signal(signal.SIGINT)
 
     _assert_interrupted_cleanly([script], 224 + round(10 * after_s), while_importing)
+
+
+MAKE_NODE_AFTER_SIGINT = """
+import sys
+import rclpy
+from rclpy.node import Node
+from cemnet_ros.ros.process import run
+
+def make_node():
+    if sys.argv[1] == "interrupted":
+        rclpy.try_shutdown()  # what rclpy's SIGINT handler does to the context
+        return Node("made_after_sigint")  # raises: the context is no longer valid
+    raise RuntimeError("a real failure while making the node")
+
+run(make_node, "probe")
+print("ended")
+"""
+
+
+@pytest.mark.dds
+def test_sigint_between_init_and_the_made_node_ends_it_with_status_0_and_a_real_error_still_raises():
+    """A Ctrl-C after rclpy.init but before the node exists (rclpy's handler shuts the context down, so making
+    the node fails): status 0, no traceback. The same failure with the context still valid is a real error."""
+    env = {**os.environ, "ROS_DOMAIN_ID": "229", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    interrupted = subprocess.run([sys.executable, "-c", MAKE_NODE_AFTER_SIGINT, "interrupted"], env=env,
+                                 capture_output=True, text=True, timeout=60)
+    assert interrupted.returncode == 0 and "Traceback" not in interrupted.stderr, interrupted.stderr
+    assert interrupted.stdout.strip() == "ended"
+    failing = subprocess.run([sys.executable, "-c", MAKE_NODE_AFTER_SIGINT, "failing"], env=env,
+                             capture_output=True, text=True, timeout=60)
+    assert failing.returncode != 0 and "a real failure while making the node" in failing.stderr
 
 
 def _assert_interrupted_cleanly(command, domain_id, interrupt):
