@@ -12,7 +12,7 @@ version = re.search(r'__version__ = "([^"]+)"', (Path(__file__).parent / package
 setup(
     name=package_name,
     version=version,
-    packages=find_packages(exclude=["test", "test.*"]),
+    packages=find_packages(exclude=["test", "test.*", "benchmarks", "benchmarks.*"]),
     package_data={package_name: ["weights/*.npz", "weights/*.md"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),

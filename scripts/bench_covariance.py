@@ -4,7 +4,7 @@
 Per sequence and ``covariance_mode`` (registration, fixed): the NEES of every step's error against ground
 truth (mean, expected 6; the share of steps below the 95 % chi-square bound 12.59; the translation and rotation
 blocks, expected 3 each), and the ATE of the odometry before and after a pose graph closes it with the true
-first-to-last motion (``cemnet_ros/bench/covariance_runs.py``). Sequences (the script downloads nothing):
+first-to-last motion (``benchmarks/covariance_runs.py``). Sequences (the script downloads nothing):
 
 * ``--balm DIR``: BALM's ``datas/benchmark_realworld`` (hku-mars/BALM, its licence: keep it out of this repo);
 * ``--bag PATH [PATH ...]``: bags with ground truth (default ``bags/kitti_00_6scans.mcap``; ``--bag none``: no
@@ -24,9 +24,9 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.covariance_runs import evaluate, nees_table, rms_lines  # noqa: E402
-from cemnet_ros.bench.live import bag_sequence  # noqa: E402
-from cemnet_ros.bench.real import Sequence, balm_sequence  # noqa: E402
+from benchmarks.covariance_runs import evaluate, nees_table, rms_lines  # noqa: E402
+from benchmarks.live import bag_sequence  # noqa: E402
+from benchmarks.real import Sequence, balm_sequence  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.tools.cli_errors import reported_errors  # noqa: E402
 

@@ -5,7 +5,7 @@
 Real 124k-point KITTI scans (../shared/data/kitti_sample, played 0..5..0, stamped with the wall clock) are
 published from this process (``--publisher serialized``: CDR bytes made once, as cheap as a C++ driver; ``python``:
 rclpy serializes each one here, on the cores the node needs) with the package's Fast DDS profile on both sides,
-as the launch file does (cemnet_ros.bench.dds_probe):
+as the launch file does (benchmarks.dds_probe):
 
 1. ``rate``: best effort at 10 Hz: received / published, processed / published, drops;
 2. ``capacity``: closed loop (the next scan when the previous odometry arrived): the rate the node sustains,
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import rclpy
 
-from cemnet_ros.bench.dds_probe import (
+from benchmarks.dds_probe import (
     REPO,
     Probe,
     dds_environment,

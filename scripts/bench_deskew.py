@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.metrics import ate_first_pose, percentile  # noqa: E402
+from benchmarks.metrics import ate_first_pose, percentile  # noqa: E402
 from cemnet_ros.data.scenes import LidarModel  # noqa: E402
 from cemnet_ros.data.skewed import SPEED, YAW_RATE_DEG, SkewedSequence, skewed_sequence  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402

@@ -32,11 +32,11 @@ if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip ins
     sys.path.insert(0, str(REPO))
 
 import cemnet_ros.ros  # noqa: E402, F401 - the node's thread policy (no spinning idle pools), before numpy's and numba's
-from cemnet_ros.bench.libraries.peers import OURS, THREADS, import_peers, versions  # noqa: E402
-from cemnet_ros.bench.libraries.sequence import bench_sequence  # noqa: E402
-from cemnet_ros.bench.libraries.startup import startup  # noqa: E402
-from cemnet_ros.bench.libraries.table import libraries_table  # noqa: E402
-from cemnet_ros.bench.real import balm_sequence, kitti_sequence  # noqa: E402
+from benchmarks.libraries.peers import OURS, THREADS, import_peers, versions  # noqa: E402
+from benchmarks.libraries.sequence import bench_sequence  # noqa: E402
+from benchmarks.libraries.startup import startup  # noqa: E402
+from benchmarks.libraries.table import libraries_table  # noqa: E402
+from benchmarks.real import balm_sequence, kitti_sequence  # noqa: E402
 from cemnet_ros.core.kernel_cache import kernel_digest  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.io.console import log  # noqa: E402

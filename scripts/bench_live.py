@@ -26,10 +26,10 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.live import bag_sequence, live_run, live_table  # noqa: E402
-from cemnet_ros.bench.odometry import available_methods  # noqa: E402
-from cemnet_ros.bench.real import balm_sequence, run_method, sequence_metrics  # noqa: E402
-from cemnet_ros.bench.streams import warm_up  # noqa: E402
+from benchmarks.live import bag_sequence, live_run, live_table  # noqa: E402
+from benchmarks.odometry import available_methods  # noqa: E402
+from benchmarks.real import balm_sequence, run_method, sequence_metrics  # noqa: E402
+from benchmarks.streams import warm_up  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.io.console import log  # noqa: E402
 from cemnet_ros.ros.node_config import NodeConfig  # noqa: E402

@@ -3,7 +3,7 @@
 
 The scans (BALM's folder, optionally thinned, or a bag with ground truth) are serialized once and published with
 their own spacing (stamps in the past, so that no rate makes them run ahead of the node's clock), from this
-process, with the package's Fast DDS profile on both sides (:mod:`cemnet_ros.bench.dds_probe`). A first scan
+process, with the package's Fast DDS profile on both sides (:mod:`benchmarks.dds_probe`). A first scan
 repeated warms the node up (engine loading, kernels), then ``~/reset`` starts a fresh map. Prints, per rate:
 scans published, odometry received, latency (publish to odometry) p50 / p95 / p99, and the ATE, end drift and
 steps off of what came out (scan_status OK = accepted), as scripts/bench_live.py does for the simulated queue.
@@ -27,9 +27,9 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.dds_probe import Probe, cloud_message, dds_environment, node_log, serialized, stamped, start_node  # noqa: E402,E501
-from cemnet_ros.bench.live import bag_sequence, live_table  # noqa: E402
-from cemnet_ros.bench.real import Sequence, StepResult, balm_sequence, sequence_metrics  # noqa: E402
+from benchmarks.dds_probe import Probe, cloud_message, dds_environment, node_log, serialized, stamped, start_node  # noqa: E402,E501
+from benchmarks.live import bag_sequence, live_table  # noqa: E402
+from benchmarks.real import Sequence, StepResult, balm_sequence, sequence_metrics  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.replay.realtime import latency_percentiles  # noqa: E402
 

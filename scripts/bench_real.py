@@ -30,9 +30,9 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.odometry import METHODS, available_methods  # noqa: E402
-from cemnet_ros.bench.real import balm_sequence, kitti_sequence, real_table, run_sequences  # noqa: E402
-from cemnet_ros.bench.streams import warm_up  # noqa: E402
+from benchmarks.odometry import METHODS, available_methods  # noqa: E402
+from benchmarks.real import balm_sequence, kitti_sequence, real_table, run_sequences  # noqa: E402
+from benchmarks.streams import warm_up  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.pipeline.config import AlignerConfig  # noqa: E402
 from cemnet_ros.schema import build  # noqa: E402

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Does a learned prior pay in the recovery's global search? (issue 12)
 
-The robustness benchmark's large-motion pairs (``cemnet_ros.bench.pairs``: courtyard, yaw any, |t| up to 10 m),
+The robustness benchmark's large-motion pairs (``benchmarks.pairs``: courtyard, yaw any, |t| up to 10 m),
 or (``--bag``) such motions between the scans of a bag with ground truth, each through a fresh ``ScanAligner`` per
 configuration: the first scan, then the second 0.1 s later (a recovery:
 "first pair"). All configurations see the same pairs in the same run, interleaved pair by pair (the order
@@ -37,10 +37,10 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench import metrics  # noqa: E402
-from cemnet_ros.bench.odometry import Output  # noqa: E402
-from cemnet_ros.bench.pairs import bag_pairs, large_motion_pairs, pair_record, read_posed_scans  # noqa: E402
-from cemnet_ros.bench.streams import run_stream  # noqa: E402
+from benchmarks import metrics  # noqa: E402
+from benchmarks.odometry import Output  # noqa: E402
+from benchmarks.pairs import bag_pairs, large_motion_pairs, pair_record, read_posed_scans  # noqa: E402
+from benchmarks.streams import run_stream  # noqa: E402
 from cemnet_ros.core.config import GlobalSearchConfig  # noqa: E402
 from cemnet_ros.core.geometry import action_to_matrix_np, matrix_to_action_np  # noqa: E402
 from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
@@ -258,7 +258,7 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
                         help="the networks compared, each NAME=PATH (PATH 'scan' = the package's LiDAR scan weights, "
                         "'' = its ModelNet40 weights, 'official', or a file; default: scan=scan)")
     parser.add_argument("--bag", type=Path, help="pairs from this bag's scans (it needs ground truth) instead of the "
-                        "ray-cast large-motion pairs: --pairs per seed, as cemnet_ros.bench.pairs.bag_pairs makes them")
+                        "ray-cast large-motion pairs: --pairs per seed, as benchmarks.pairs.bag_pairs makes them")
     parser.add_argument("--allow-pickle", action="store_true", help="allow pickled (.pth) weights you trust")
     parser.add_argument("--n-prior", type=int, default=search.n_network,
                         help=f"prior draws: recovery.search.n_network (default {search.n_network})")

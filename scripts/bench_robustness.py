@@ -17,7 +17,7 @@ Every method sees the same points (float64, sensor frame). ``ScanAligner`` is us
 KISS-ICP with its default config (max_range of the sensor, voxel = max_range / 100), a fresh instance per
 pair/sequence; small_gicp GICP scan-to-scan from the identity. The peers have no failure flag: all their
 steps count as accepted. Exceptions are caught per step and counted as failures with their message.
-The benchmark itself is the package's ``cemnet_ros.bench``; this is its command line.
+The benchmark itself is the package's ``benchmarks``; this is its command line.
 
     python scripts/bench_robustness.py --quick
     python scripts/bench_robustness.py --sets large_motion sequences --pairs 40 --out results/robust.json
@@ -36,8 +36,8 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.odometry import METHODS  # noqa: E402
-from cemnet_ros.bench.robustness import FULL, QUICK, SETS, RobustnessConfig, run  # noqa: E402
+from benchmarks.odometry import METHODS  # noqa: E402
+from benchmarks.robustness import FULL, QUICK, SETS, RobustnessConfig, run  # noqa: E402
 from cemnet_ros.io.atomic import write_report  # noqa: E402
 from cemnet_ros.pipeline.config import AlignerConfig  # noqa: E402
 from cemnet_ros.schema import build  # noqa: E402

@@ -79,7 +79,7 @@ def register(env: dict, work: Path) -> dict:
 
 def node(env: dict) -> dict:
     """Seconds until align_node logs that its engine is ready (its log says how long the load took)."""
-    from cemnet_ros.bench.dds_probe import dds_environment, node_log, start_node
+    from benchmarks.dds_probe import dds_environment, node_log, start_node
 
     start = time.time()
     process = start_node("/bench_startup", {}, log_level="info", env={**env, **dds_environment()})

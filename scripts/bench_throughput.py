@@ -29,9 +29,9 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.bench.speed import ping_pong_cycle  # noqa: E402
+from benchmarks.shared import SHARED  # noqa: E402
+from benchmarks.speed import ping_pong_cycle  # noqa: E402
 from cemnet_ros.data.kitti import kitti_scans  # noqa: E402
-from cemnet_ros.data.shared import SHARED  # noqa: E402
 from cemnet_ros.ros.node_config import NodeConfig  # noqa: E402
 from cemnet_ros.runtime.worker import BoundedWorker  # noqa: E402
 

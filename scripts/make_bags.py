@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
-from cemnet_ros.data import shared  # noqa: E402
+from benchmarks import shared  # noqa: E402
 from cemnet_ros.data.bags import write_bag  # noqa: E402
 from cemnet_ros.data.kitti import kitti_frames  # noqa: E402
 from cemnet_ros.data.rgbd import rgbd_frames  # noqa: E402

@@ -5,7 +5,7 @@
 Real 124k-point KITTI scans (../shared/data/kitti_sample, played forth and back, wall-clock stamps, the
 package's DDS profile on both sides). Every ``--fault-every`` seconds one fault, in turn:
 
-- ``bad_cloud``: a message of the hostile corpus (cemnet_ros.data.hostile; malformed, degenerate, a sector,
+- ``bad_cloud``: a message of the hostile corpus (benchmarks.hostile; malformed, degenerate, a sector,
   another robot's frame, bytes that do not deserialize, ...), in place of that period's scan;
 - ``stamp_ahead``: a scan stamped 60 s ahead (refused: beyond the clock tolerance), then the stream goes on;
 - ``stamp_back``: a scan stamped 2 s back (out of order);
@@ -33,7 +33,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import PointCloud2, PointField
 
-from cemnet_ros.bench.dds_probe import (
+from benchmarks.dds_probe import (
     REPO,
     Probe,
     dds_environment,
@@ -44,7 +44,7 @@ from cemnet_ros.bench.dds_probe import (
     stamped,
     start_node,
 )
-from cemnet_ros.data.hostile import FRAME, corpus
+from benchmarks.hostile import FRAME, corpus
 from cemnet_ros.io.atomic import atomic_write_bytes, json_text, write_report
 
 NS = "/soak"

@@ -1,10 +1,10 @@
-"""Where the optional real data lives (../shared: :data:`cemnet_ros.data.shared.SHARED`); tests that
+"""Where the optional real data lives (../shared: :data:`benchmarks.shared.SHARED`); tests that
 need it use :func:`requires_shared` and skip cleanly when it is absent."""
 from pathlib import Path
 
 import pytest
 
-from cemnet_ros.data.shared import SHARED
+from benchmarks.shared import SHARED
 
 OFFICIAL_DIR = SHARED / "reference" / "cemnet_official"
 MODELNET = SHARED / "data" / "modelnet40_subset.npz"

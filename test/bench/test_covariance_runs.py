@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cemnet_ros.bench.covariance_runs import evaluate, nees_table
-from cemnet_ros.bench.live import bag_sequence
+from benchmarks.covariance_runs import evaluate, nees_table
+from benchmarks.live import bag_sequence
 from cemnet_ros.ros.node_config import NodeConfig
 
 REPO = Path(__file__).resolve().parents[2]

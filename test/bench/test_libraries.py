@@ -1,4 +1,4 @@
-"""The library benchmark (cemnet_ros.bench.libraries, scripts/bench_libraries.py) on small synthetic scans: its
+"""The library benchmark (benchmarks.libraries, scripts/bench_libraries.py) on small synthetic scans: its
 timing, offsets and steps, ours' side of every piece, and each peer's side where that peer is installed."""
 from __future__ import annotations
 
@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.bench.libraries import peers
-from cemnet_ros.bench.libraries.inputs import Stage, Step, box_scan, orthonormal, perturbed, polish_steps
-from cemnet_ros.bench.libraries.local_maps import agreement, downsample_calls, local_maps, nearest_calls
-from cemnet_ros.bench.libraries.peers import OURS, import_peers
-from cemnet_ros.bench.libraries.sequence import bench_sequence
-from cemnet_ros.bench.libraries.startup import first_calls, startup_run
-from cemnet_ros.bench.libraries.table import libraries_table
-from cemnet_ros.bench.libraries.timing import OTHERS, interleaved, timing_summary
-from cemnet_ros.bench.metrics import relative_error
-from cemnet_ros.bench.real import Sequence
+from benchmarks.libraries import peers
+from benchmarks.libraries.inputs import Stage, Step, box_scan, orthonormal, perturbed, polish_steps
+from benchmarks.libraries.local_maps import agreement, downsample_calls, local_maps, nearest_calls
+from benchmarks.libraries.peers import OURS, import_peers
+from benchmarks.libraries.sequence import bench_sequence
+from benchmarks.libraries.startup import first_calls, startup_run
+from benchmarks.libraries.table import libraries_table
+from benchmarks.libraries.timing import OTHERS, interleaved, timing_summary
+from benchmarks.metrics import relative_error
+from benchmarks.real import Sequence
 from cemnet_ros.core.geometry import apply_transform, rigid_transform
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.steps.frame import Frame

@@ -1,8 +1,8 @@
-"""NEES of the published covariance (cemnet_ros.bench.nees): its error's parameterisation and its statistics."""
+"""NEES of the published covariance (benchmarks.nees): its error's parameterisation and its statistics."""
 import numpy as np
 from street_scene import make_transform
 
-from cemnet_ros.bench.nees import CHI2_95, consistency, nees, step_consistency, step_error
+from benchmarks.nees import CHI2_95, consistency, nees, step_consistency, step_error
 from cemnet_ros.core.geometry import so3_exp
 from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
 

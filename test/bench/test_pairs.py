@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cemnet_ros.bench.pairs import bag_pairs, read_posed_scans
+from benchmarks.pairs import bag_pairs, read_posed_scans
 from cemnet_ros.core.geometry import apply_transform, matrix_to_action_np
 
 

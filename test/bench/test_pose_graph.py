@@ -1,8 +1,8 @@
-"""The pose graph (cemnet_ros.bench.pose_graph) shares a loop closure's error between the steps by their covariances."""
+"""The pose graph (benchmarks.pose_graph) shares a loop closure's error between the steps by their covariances."""
 import numpy as np
 from street_scene import make_transform
 
-from cemnet_ros.bench.pose_graph import close_loop
+from benchmarks.pose_graph import close_loop
 from cemnet_ros.runtime.extrinsic import in_body_axes
 
 

@@ -1,8 +1,8 @@
-"""The real-data benchmark's readers and metrics (cemnet_ros.bench.real) on small made-up sequences."""
+"""The real-data benchmark's readers and metrics (benchmarks.real) on small made-up sequences."""
 import numpy as np
 from street_scene import make_transform
 
-from cemnet_ros.bench.real import Sequence, StepResult, balm_sequence, real_table, sequence_metrics
+from benchmarks.real import Sequence, StepResult, balm_sequence, real_table, sequence_metrics
 
 PERIOD_NS = 500_000_000
 

@@ -1,4 +1,4 @@
-"""The robustness benchmark (cemnet_ros.bench, scripts/bench_robustness.py): its metrics on hand-made poses, and a
+"""The robustness benchmark (benchmarks, scripts/bench_robustness.py): its metrics on hand-made poses, and a
 tiny end-to-end run of `large_motion`."""
 from __future__ import annotations
 
@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.bench.drives import make_drive
-from cemnet_ros.bench.fast_gaps import GAPS, LEAD_TICKS, fast_drive
-from cemnet_ros.bench.metrics import accepted_wrong, ate_first_pose, end_drift_percent, relative_error, summarize
-from cemnet_ros.bench.pairs import Pair, pair_record
-from cemnet_ros.bench.robustness import QUICK, RobustnessConfig, run
-from cemnet_ros.bench.sequences import event_outcome
-from cemnet_ros.bench.speed import ping_pong
-from cemnet_ros.bench.streams import Scan, run_stream, step_records
-from cemnet_ros.bench.tables import fast_gaps_table
+from benchmarks.drives import make_drive
+from benchmarks.fast_gaps import GAPS, LEAD_TICKS, fast_drive
+from benchmarks.metrics import accepted_wrong, ate_first_pose, end_drift_percent, relative_error, summarize
+from benchmarks.pairs import Pair, pair_record
+from benchmarks.robustness import QUICK, RobustnessConfig, run
+from benchmarks.sequences import event_outcome
+from benchmarks.speed import ping_pong
+from benchmarks.streams import Scan, run_stream, step_records
+from benchmarks.tables import fast_gaps_table
 from cemnet_ros.data.scenes import COURTYARD_BOUNDS, courtyard_scene, in_free_space
 
 
@@ -204,7 +204,7 @@ def test_script_turns_its_flags_into_the_config():
 
 
 def test_the_pipeline_under_test_takes_parameter_overrides():
-    from cemnet_ros.bench.odometry import available_methods
+    from benchmarks.odometry import available_methods
 
     default = available_methods(["cemnet"])["cemnet"](100.0)
     lean = available_methods(["cemnet"], {"recovery.search.n_scatter": 125})["cemnet"](100.0)

@@ -5,9 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.shared import shared_dir
 from cemnet_ros.data import scenes
 from cemnet_ros.data.kitti import kitti_scans
-from cemnet_ros.data.shared import shared_dir
 
 
 def _corridor_world_points(x: float, lidar: scenes.LidarModel, seed: int = 0) -> np.ndarray:

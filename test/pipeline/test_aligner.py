@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from street_scene import make_transform, make_world, street_scan
 
-from cemnet_ros.bench.metrics import relative_error, within
+from benchmarks.metrics import relative_error, within
 from cemnet_ros.core import CEMConfig, EngineConfig
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig, PreprocessConfig, TrackingConfig

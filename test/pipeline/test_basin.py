@@ -2,7 +2,7 @@
 import numpy as np
 from street_scene import make_transform
 
-from cemnet_ros.bench.metrics import relative_error
+from benchmarks.metrics import relative_error
 from cemnet_ros.pipeline.map.gicp_cloud import gicp_cloud
 from cemnet_ros.pipeline.steps.basin import gicp
 

@@ -42,8 +42,8 @@ def test_a_car_lost_in_new_ground_after_a_gap_restarts_where_its_answers_moved()
     """A car at 22 m/s through 0.8 s without scans (the first `fast_gaps` drive): the gap opens 17 m of new
     ground, three steps fit below the running level and are flagged; their answers move steadily, so the map
     restarts at the last one and not at the prediction (about 1 m and 5 deg off, the weave extrapolated)."""
-    from cemnet_ros.bench.fast_gaps import LIDAR, fast_drive
-    from cemnet_ros.bench.metrics import relative_error
+    from benchmarks.fast_gaps import LIDAR, fast_drive
+    from benchmarks.metrics import relative_error
     from cemnet_ros.data.scenes import courtyard_scene, lidar_scan
     from cemnet_ros.pipeline.aligner import ScanAligner
     from cemnet_ros.pipeline.config import AlignerConfig

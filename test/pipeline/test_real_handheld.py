@@ -10,7 +10,7 @@ import numpy as np
 from shared_data import KITTI, requires_shared
 from street_scene import make_transform
 
-from cemnet_ros.bench.metrics import relative_error
+from benchmarks.metrics import relative_error
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.data.kitti import kitti_scans
 from cemnet_ros.pipeline.aligner import ScanAligner

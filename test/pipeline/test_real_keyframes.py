@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from shared_data import KITTI, requires_shared
 
-from cemnet_ros.bench.metrics import relative_error
-from cemnet_ros.bench.real import kitti_sequence
+from benchmarks.metrics import relative_error
+from benchmarks.real import kitti_sequence
 from cemnet_ros.pipeline.aligner import ScanAligner
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from courtyard_pair import courtyard_pair
 
-from cemnet_ros.bench.metrics import relative_error
+from benchmarks.metrics import relative_error
 from cemnet_ros.core import Registrar
 from cemnet_ros.core.checkpoint import CheckpointError
 from cemnet_ros.pipeline.aligner import ScanAligner

@@ -3,7 +3,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from street_scene import make_transform, make_world, seen_from
 
-from cemnet_ros.bench.metrics import relative_error
+from benchmarks.metrics import relative_error
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.refine import point_to_plane_icp
 

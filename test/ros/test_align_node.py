@@ -19,7 +19,7 @@ from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 from street_scene import make_transform  # noqa: E402
 
-from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from benchmarks.metrics import relative_error  # noqa: E402
 from cemnet_ros.pointcloud2 import decode_xyz, make_pointcloud2  # noqa: E402
 from cemnet_ros.ros.outputs import TFMessage  # noqa: E402
 

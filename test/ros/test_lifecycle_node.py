@@ -21,7 +21,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
-from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from benchmarks.metrics import relative_error  # noqa: E402
 from cemnet_ros.ros.align_lifecycle_node import AlignLifecycleNode  # noqa: E402
 
 pytestmark = pytest.mark.dds

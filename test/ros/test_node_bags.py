@@ -12,7 +12,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 
 from node_harness import FIRST_TIMEOUT, pose_of, read_bag  # noqa: E402
 
-from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from benchmarks.metrics import relative_error  # noqa: E402
 
 BAGS = sorted((Path(__file__).resolve().parents[2] / "bags").glob("*.mcap"))
 FLOORS = {"kitti": ("pair", 0.05, 0.2), "synthetic": ("pair", 0.02, 0.1), "rgbd": ("ate", 0.02, None),

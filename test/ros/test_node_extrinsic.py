@@ -11,7 +11,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 
 from node_harness import EXTRINSIC, FIRST_TIMEOUT, POSES, StandInBuffer, pose_of, scan_msg, transform, wait_for  # noqa: E402
 
-from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from benchmarks.metrics import relative_error  # noqa: E402
 from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy  # noqa: E402
 
 pytestmark = pytest.mark.dds

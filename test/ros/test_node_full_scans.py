@@ -19,7 +19,7 @@ import time
 import numpy as np
 import pytest
 
-from cemnet_ros.bench.dds_probe import PROFILE, dds_environment, node_log, start_node
+from benchmarks.dds_probe import PROFILE, dds_environment, node_log, start_node
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow]
 
@@ -74,7 +74,7 @@ def _publish() -> dict:
     """Wait until the node aligns, then N_SCANS at 10 Hz best effort; what came back once the node drained."""
     import rclpy
 
-    from cemnet_ros.bench.dds_probe import Probe, cloud_message, serialized, stamped
+    from benchmarks.dds_probe import Probe, cloud_message, serialized, stamped
     from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan, synthetic_trajectory
 
     scene, lidar, rng = courtyard_scene(), LidarModel(n_beams=64, n_azimuth=2000), np.random.default_rng(0)

@@ -1,4 +1,4 @@
-"""The hostile corpus (cemnet_ros.data.hostile, >= 90 messages) through align_node over DDS.
+"""The hostile corpus (benchmarks.hostile, >= 90 messages) through align_node over DDS.
 
 Every hostile message must be rejected with a counted reason or published flagged (or, when oversized,
 processed with a warning); nothing crashes; the valid scans between them come out as in a clean run.
@@ -12,8 +12,8 @@ from node_harness import WORLD, Harness, pose_of, wait_for
 from sensor_msgs.msg import PointCloud2, PointField
 from street_scene import make_transform
 
-from cemnet_ros.bench.metrics import relative_error
-from cemnet_ros.data.hostile import corpus
+from benchmarks.hostile import corpus
+from benchmarks.metrics import relative_error
 from cemnet_ros.pointcloud2 import make_pointcloud2
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow]

@@ -26,7 +26,7 @@ from ros_cli import domain_id, interrupt, kill_group, param_dump, start  # noqa:
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
-from cemnet_ros.bench.metrics import relative_error  # noqa: E402
+from benchmarks.metrics import relative_error  # noqa: E402
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
 from cemnet_ros.ros.node_config import node_parameters  # noqa: E402
 

@@ -39,7 +39,7 @@ ROSDEP_KEYS = {
     "torch": (PIP, "torch"),  # python3-torch is the distribution's own build, not the pinned 2.13.0 CPU one
     "rosbags": (PIP, "rosbags"),  # only python3-rosbags-pip (`sudo pip`, refused on Ubuntu 24.04: PEP 668)
     "open3d": (OPTIONAL, "open3d-cpu"),  # cemnet-eval's FPFH baseline only
-    "kiss_icp": (OPTIONAL, "kiss-icp"),  # the robustness benchmark's peers only (cemnet_ros.bench)
+    "kiss_icp": (OPTIONAL, "kiss-icp"),  # the robustness benchmark's peers only (benchmarks)
     "small_gicp": (PIP, "small-gicp"),  # GICP, the polish's wide stage: its Python bindings are on PyPI only
 }
 

@@ -9,7 +9,7 @@ from builtin_interfaces.msg import Time
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 
-from cemnet_ros.data.hostile import cdr_cases
+from benchmarks.hostile import cdr_cases
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pointcloud2 import make_pointcloud2
 from cemnet_ros.ros.scans import Incoming, cdr_stamp, decode

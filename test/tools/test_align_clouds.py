@@ -32,7 +32,7 @@ def test_auto_keeps_the_engine_for_every_modelnet_shape():
 @pytest.mark.parametrize("target_index, source_index", [(0, 1), (3, 4)])
 def test_register_two_kitti_scans_lands_within_2_cm_and_a_tenth_of_a_degree(tmp_path, capsys, target_index,
                                                                             source_index):
-    from cemnet_ros.bench.metrics import relative_error
+    from benchmarks.metrics import relative_error
     from cemnet_ros.data.kitti import kitti_scans
     from cemnet_ros.tools import register_cli
 

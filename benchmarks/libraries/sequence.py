@@ -8,7 +8,7 @@ from typing import Any, Optional
 import numba
 import numpy as np
 
-from cemnet_ros.bench.libraries.inputs import (
+from benchmarks.libraries.inputs import (
     FINE_DISTANCE_VOXELS,
     OFFSETS,
     Step,
@@ -18,11 +18,11 @@ from cemnet_ros.bench.libraries.inputs import (
     polish_steps,
     sequence_frames,
 )
-from cemnet_ros.bench.libraries.local_maps import agreement, downsample_calls, filled_maps, local_maps, nearest_calls
-from cemnet_ros.bench.libraries.peers import OURS, THREADS
-from cemnet_ros.bench.libraries.timing import interleaved, timing_summary
-from cemnet_ros.bench.metrics import percentile, relative_error
-from cemnet_ros.bench.real import OFF_DEG, OFF_M, Sequence
+from benchmarks.libraries.local_maps import agreement, downsample_calls, filled_maps, local_maps, nearest_calls
+from benchmarks.libraries.peers import OURS, THREADS
+from benchmarks.libraries.timing import interleaved, timing_summary
+from benchmarks.metrics import percentile, relative_error
+from benchmarks.real import OFF_DEG, OFF_M, Sequence
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.io.console import progress
 from cemnet_ros.pipeline.config import AlignerConfig

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Callable, Optional
 
-from cemnet_ros.bench.libraries.peers import OURS
+from benchmarks.libraries.peers import OURS
 
 
 def _f(value: Optional[float], fmt: str = ".1f") -> str:

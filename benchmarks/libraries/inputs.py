@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cemnet_ros.bench.real import Sequence
+from benchmarks.real import Sequence
 from cemnet_ros.core.geometry import rigid_transform, so3_exp
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor

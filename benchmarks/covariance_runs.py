@@ -14,10 +14,10 @@ from typing import Optional
 
 import numpy as np
 
-from cemnet_ros.bench.metrics import ate_first_pose
-from cemnet_ros.bench.nees import step_consistency, step_error
-from cemnet_ros.bench.pose_graph import close_loop
-from cemnet_ros.bench.real import Sequence
+from benchmarks.metrics import ate_first_pose
+from benchmarks.nees import step_consistency, step_error
+from benchmarks.pose_graph import close_loop
+from benchmarks.real import Sequence
 from cemnet_ros.io.console import progress
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.ros.node_config import NodeConfig

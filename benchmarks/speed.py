@@ -6,8 +6,8 @@ from typing import Callable
 
 import numpy as np
 
-from cemnet_ros.bench.metrics import percentile
-from cemnet_ros.bench.streams import run_stream
+from benchmarks.metrics import percentile
+from benchmarks.streams import run_stream
 from cemnet_ros.data.kitti import kitti_scans
 from cemnet_ros.io.console import log
 

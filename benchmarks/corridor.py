@@ -7,8 +7,8 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.bench.metrics import summarize
-from cemnet_ros.bench.streams import DT, Scan, run_stream, step_records
+from benchmarks.metrics import summarize
+from benchmarks.streams import DT, Scan, run_stream, step_records
 from cemnet_ros.data.scenes import LidarModel, corridor_scene, lidar_scan
 from cemnet_ros.io.console import log
 

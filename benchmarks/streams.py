@@ -7,7 +7,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from cemnet_ros.bench.metrics import relative_error
+from benchmarks.metrics import relative_error
 from cemnet_ros.data.scenes import COURTYARD_BOUNDS, LidarModel, courtyard_scene, lidar_scan, random_sensor_pose
 from cemnet_ros.io.console import log
 

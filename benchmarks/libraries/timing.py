@@ -8,8 +8,8 @@ from typing import Any, Callable, Mapping, Optional
 
 import numpy as np
 
-from cemnet_ros.bench.libraries.peers import OURS
-from cemnet_ros.bench.metrics import percentile
+from benchmarks.libraries.peers import OURS
+from benchmarks.metrics import percentile
 
 OTHERS = "others_cores"  # the key, in a times dict, of each round's load from other processes (cores in use)
 QUIET_CORES = 0.25  # a round during which other processes used less than this is a quiet one

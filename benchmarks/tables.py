@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cemnet_ros.bench.metrics import PRECISE_DEG, PRECISE_M, RECALL_DEG, RECALL_M
+from benchmarks.metrics import PRECISE_DEG, PRECISE_M, RECALL_DEG, RECALL_M
 
 TOL = f"{PRECISE_M} m / {PRECISE_DEG} deg"
 DEFINITIONS = "\n".join([

@@ -29,7 +29,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 from std_srvs.srv import Trigger
 
-from cemnet_ros.data.shared import REPO, SHARED
+from benchmarks.shared import REPO, SHARED
 from cemnet_ros.ros.scans import HEADER_STAMP_OFFSET
 from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
 

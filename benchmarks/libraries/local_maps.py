@@ -9,9 +9,9 @@ from typing import Any, Callable, Optional
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cemnet_ros.bench.libraries.inputs import Stage, Step
-from cemnet_ros.bench.libraries.peers import CONVERGENCE, NEIGHBOURS, OURS, THREADS
-from cemnet_ros.bench.libraries.timing import interleaved
+from benchmarks.libraries.inputs import Stage, Step
+from benchmarks.libraries.peers import CONVERGENCE, NEIGHBOURS, OURS, THREADS
+from benchmarks.libraries.timing import interleaved
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap

@@ -14,7 +14,7 @@ from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from cemnet_ros.bench.real import Sequence, StepResult, sequence_metrics
+from benchmarks.real import Sequence, StepResult, sequence_metrics
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.replay.realtime import live_summary, play_live

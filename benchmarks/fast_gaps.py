@@ -8,8 +8,8 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.bench.metrics import ate_first_pose, summarize
-from cemnet_ros.bench.streams import DT, run_stream, step_records
+from benchmarks.metrics import ate_first_pose, summarize
+from benchmarks.streams import DT, run_stream, step_records
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan
 from cemnet_ros.io.console import log
 

@@ -11,8 +11,8 @@ from typing import Callable
 
 import numpy as np
 
-from cemnet_ros.bench.drives import Drive, make_drive
-from cemnet_ros.bench.metrics import (
+from benchmarks.drives import Drive, make_drive
+from benchmarks.metrics import (
     PRECISE_DEG,
     PRECISE_M,
     ate_first_pose,
@@ -21,7 +21,7 @@ from cemnet_ros.bench.metrics import (
     summarize,
     within,
 )
-from cemnet_ros.bench.streams import Scan, run_stream, scan_dicts, step_records
+from benchmarks.streams import Scan, run_stream, scan_dicts, step_records
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, lidar_scan
 from cemnet_ros.io.console import log, progress
 

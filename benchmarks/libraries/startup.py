@@ -13,10 +13,10 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from cemnet_ros.bench.libraries.inputs import Stage, Step, box_scan
-from cemnet_ros.bench.libraries.local_maps import downsample_calls, local_maps
-from cemnet_ros.bench.libraries.peers import OURS, PEER_MODULES, THREADS, import_peers
-from cemnet_ros.bench.libraries.timing import OTHERS, interleaved
+from benchmarks.libraries.inputs import Stage, Step, box_scan
+from benchmarks.libraries.local_maps import downsample_calls, local_maps
+from benchmarks.libraries.peers import OURS, PEER_MODULES, THREADS, import_peers
+from benchmarks.libraries.timing import OTHERS, interleaved
 from cemnet_ros.core.geometry import rigid_transform, so3_exp
 from cemnet_ros.io.console import log, progress
 from cemnet_ros.pipeline.config import AlignerConfig
@@ -62,7 +62,7 @@ def _probe(library: str, modules: tuple[str, ...]) -> dict[str, float]:
     for module in modules:
         importlib.import_module(module)
     import_ms = 1e3 * (time.perf_counter() - start)
-    from cemnet_ros.bench.libraries.startup import first_calls
+    from benchmarks.libraries.startup import first_calls
 
     return {"import_ms": import_ms, **first_calls(library)}
 
@@ -75,7 +75,7 @@ def startup_run(library: str, cache_dir: Optional[str] = None) -> dict[str, floa
     env = dict(os.environ, NUMBA_NUM_THREADS=str(THREADS))
     if cache_dir is not None:
         env["NUMBA_CACHE_DIR"] = cache_dir
-    repo = Path(__file__).resolve().parents[3]
+    repo = Path(__file__).resolve().parents[2]
     env["PYTHONPATH"] = os.pathsep.join([str(repo)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     done = subprocess.run([sys.executable, "-c", code, library, *IMPORTS[library]], env=env, capture_output=True,
                           text=True)

@@ -8,7 +8,7 @@ from typing import Optional
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.bench.streams import DT
+from benchmarks.streams import DT
 from cemnet_ros.data.scenes import COURTYARD_BOUNDS, courtyard_scene, in_free_space, random_sensor_pose
 
 EVENT_TICKS = {"dropout": 6, "stop_and_go": 16, "yaw_swing": 16, "kidnap": 1}  # ticks each event occupies

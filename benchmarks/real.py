@@ -16,7 +16,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from cemnet_ros.bench.metrics import ate_first_pose, end_drift_percent, percentile, relative_error
+from benchmarks.metrics import ate_first_pose, end_drift_percent, percentile, relative_error
 from cemnet_ros.core.geometry import rotation_angle_deg
 from cemnet_ros.data.kitti import kitti_scans
 from cemnet_ros.io.console import progress

@@ -14,16 +14,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-from cemnet_ros.bench.corridor import CORRIDOR_MAX_SCANS, run_corridor
-from cemnet_ros.bench.drives import MIN_SEQ_TICKS
-from cemnet_ros.bench.fast_gaps import run_fast_gaps
-from cemnet_ros.bench.odometry import METHODS, available_methods
-from cemnet_ros.bench.pairs import kitti_pairs, large_motion_pairs, run_pairs
-from cemnet_ros.bench.sequences import run_sequences
-from cemnet_ros.bench.speed import run_speed
-from cemnet_ros.bench.streams import warm_up
-from cemnet_ros.bench.tables import report_markdown
-from cemnet_ros.data.shared import SHARED
+from benchmarks.corridor import CORRIDOR_MAX_SCANS, run_corridor
+from benchmarks.drives import MIN_SEQ_TICKS
+from benchmarks.fast_gaps import run_fast_gaps
+from benchmarks.odometry import METHODS, available_methods
+from benchmarks.pairs import kitti_pairs, large_motion_pairs, run_pairs
+from benchmarks.sequences import run_sequences
+from benchmarks.shared import SHARED
+from benchmarks.speed import run_speed
+from benchmarks.streams import warm_up
+from benchmarks.tables import report_markdown
 from cemnet_ros.io.console import log
 from cemnet_ros.io.report import Report
 
@@ -75,7 +75,7 @@ class RobustnessConfig:
 
 @dataclass
 class RobustnessReport(Report):
-    """The results per set (a set's JSON as :mod:`cemnet_ros.bench.tables` reads it), the methods that ran, the
+    """The results per set (a set's JSON as :mod:`benchmarks.tables` reads it), the methods that ran, the
     sets skipped (with why) and when it started."""
 
     config: RobustnessConfig

@@ -13,8 +13,8 @@ from typing import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cemnet_ros.bench.metrics import summarize
-from cemnet_ros.bench.streams import Scan, run_stream, step_record, step_records
+from benchmarks.metrics import summarize
+from benchmarks.streams import Scan, run_stream, step_record, step_records
 from cemnet_ros.data.kitti import kitti_scans
 from cemnet_ros.data.scenes import (
     COURTYARD_BOUNDS,
