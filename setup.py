@@ -40,7 +40,7 @@ setup(
         "test": ["pytest>=7", "colcon-common-extensions", "ruff>=0.17,<0.18", "mypy>=2.4,<3"],
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         "open3d": ["open3d-cpu>=0.18"],
-        "bench": ["kiss-icp", "evo"],
+        "bench": ["kiss-icp", "genz-icp", "evo"],
     },
     zip_safe=True,
     maintainer="cemnet_ros maintainers",

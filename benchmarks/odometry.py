@@ -1,8 +1,8 @@
 """The methods under test, each a fresh odometry per pair / sequence: ``process(points, stamp_ns) -> Output``.
 
-``ScanAligner`` with default parameters (or overrides of them); KISS-ICP with its default config (max_range of
-the sensor, voxel = max_range / 100); small_gicp GICP scan-to-scan from the identity. The peers have no failure
-flag: all their steps count as accepted.
+``ScanAligner`` with default parameters (or overrides of them); KISS-ICP and GenZ-ICP with their default configs
+(max_range of the sensor; KISS-ICP's voxel = max_range / 100); small_gicp GICP scan-to-scan from the identity. The
+peers have no failure flag: all their steps count as accepted.
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import numpy as np
 
 from cemnet_ros.io.console import log
 
-METHODS = ("cemnet", "kiss-icp", "gicp")
+METHODS = ("cemnet", "kiss-icp", "genz-icp", "gicp")
 
 
 @dataclass
@@ -27,6 +27,8 @@ class Output:
     reason: str = ""
     covariance: Optional[np.ndarray] = None
     recovered: bool = False  # the step ran a global search (the peers have none)
+    answer: Optional[np.ndarray] = None  # the registered answer judged, flagged or not (None: the pose)
+    restarted: bool = False  # the map restarted at this scan (lost)
 
 
 class CemnetOdometry:
@@ -41,6 +43,12 @@ class CemnetOdometry:
 
     def process(self, points: np.ndarray, stamp_ns: int) -> Output:
         step = self._aligner.process(points, stamp_ns)
+        return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason), np.asarray(step.covariance),
+                      bool(step.recovered), step.answer, bool(step.map_restarted))
+
+    def pair(self, source: np.ndarray, target: np.ndarray) -> Output:
+        """``source`` registered onto ``target`` from no history: pair mode, as ``align_clouds`` runs it."""
+        step = self._aligner.align_pair(source, target, 0)
         return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason), np.asarray(step.covariance),
                       bool(step.recovered))
 
@@ -60,6 +68,22 @@ class KissOdometry:
     def process(self, points: np.ndarray, stamp_ns: int) -> Output:
         self._kiss.register_frame(points, np.empty(0))  # no per-point timestamps: no deskewing
         return Output(self._kiss.last_pose.copy())
+
+
+class GenzOdometry:
+    """GenZ-ICP with its default config; ``max_range`` set for the sensor."""
+
+    def __init__(self, max_range: float) -> None:
+        from genz_icp.config import GenZConfig
+        from genz_icp.genz_icp import GenZICP
+
+        config = GenZConfig()
+        config.data.max_range = max_range
+        self._genz = GenZICP(config)
+
+    def process(self, points: np.ndarray, stamp_ns: int) -> Output:
+        self._genz.register_frame(points, np.empty(0))  # no per-point timestamps: no deskewing
+        return Output(self._genz.last_pose.copy())
 
 
 class GicpOdometry:
@@ -85,8 +109,9 @@ class GicpOdometry:
         return Output(self._pose.copy())
 
 
-FACTORIES: dict[str, Callable] = {"cemnet": CemnetOdometry, "kiss-icp": KissOdometry, "gicp": GicpOdometry}
-PEER_MODULES = {"kiss-icp": "kiss_icp.kiss_icp", "gicp": "small_gicp"}
+FACTORIES: dict[str, Callable] = {"cemnet": CemnetOdometry, "kiss-icp": KissOdometry, "genz-icp": GenzOdometry,
+                                  "gicp": GicpOdometry}
+PEER_MODULES = {"kiss-icp": "kiss_icp.kiss_icp", "genz-icp": "genz_icp.genz_icp", "gicp": "small_gicp"}
 
 
 def available_methods(wanted: list[str], overrides: Optional[Mapping[str, Any]] = None) -> dict[str, Callable]:

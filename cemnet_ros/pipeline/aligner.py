@@ -173,9 +173,11 @@ class ScanAligner:
         self._motion.update(self._pose, stamp_ns)
         self._spread.reset()
         self._pending_recovery = "first pair"  # a single pose predicts nothing
-        return AlignmentStep.unregistered(stamp_ns, self._pose, accepted=not restarted, fitness=1.0,
+        step = AlignmentStep.unregistered(stamp_ns, self._pose, accepted=not restarted, fitness=1.0,
                                           latency_s=time.perf_counter() - start, n_points=len(frame.sampled),
                                           reason=reason)
+        step.map_restarted = True
+        return step
 
     def _restart_map(self, frame: Frame, T_odom_sensor: np.ndarray) -> None:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
@@ -195,18 +197,22 @@ class ScanAligner:
         """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
         estimate, previous = registered.estimate, self._pose
         carried = self._carried(estimate, T_predicted)
+        restarted = False
         if estimate.failures:
             pose, reasons = self._failed(frame, stamp_ns, T_predicted, estimate)
+            restarted = self._failures_in_a_row == 0
         else:
             pose, reasons = estimate.T_odom_sensor, list(estimate.notes)
             self._extend(frame, pose, T_predicted, estimate)
         self._pose = pose
         self._motion.update(pose, stamp_ns)
-        return AlignmentStep.registered(
+        step = AlignmentStep.registered(
             estimate, stamp_ns=stamp_ns, pose=pose, relative=np.linalg.inv(previous) @ pose,
             covariance_inflation=self.config.health.covariance_inflation, latency_s=time.perf_counter() - start,
             n_points=len(frame.sampled), reason="" if estimate.accepted else "; ".join(reasons),
             recovery_reason=registered.why_recovered, polishes=registered.contest.polishes, carried=carried)
+        step.map_restarted = restarted
+        return step
 
     def _carried(self, estimate: Estimate, T_predicted: np.ndarray) -> np.ndarray:
         """What the previous pose's error against the map adds to this step's covariance; the pose published now

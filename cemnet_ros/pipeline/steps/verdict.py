@@ -48,6 +48,8 @@ class AlignmentStep:
     origin: str = ""  # the start the published answer was polished from: prediction, cem, last pose, search
     effort: float = 1.0  # the share of the polishes' and the search's budgets this scan had (a live node behind)
     polishes: int = 0  # answers polished and judged for this scan (the cost of its decision)
+    answer: Optional[np.ndarray] = None  # (4, 4) the registered answer judged, also when flagged (None: none)
+    map_restarted: bool = False  # the map restarted from this scan (the first scan, or lost)
 
     @classmethod
     def registered(cls, estimate: Estimate, *, stamp_ns: int, pose: np.ndarray, relative: Optional[np.ndarray],
@@ -61,7 +63,8 @@ class AlignmentStep:
                    fitness=estimate.signals.fitness,
                    accepted=estimate.accepted, latency_s=latency_s, n_points=n_points, reason=reason,
                    recovered=estimate.recovered, recovery_reason=recovery_reason, degenerate=estimate.degenerate,
-                   signals=estimate.signals.as_dict(), origin=estimate.published_origin, polishes=polishes)
+                   signals=estimate.signals.as_dict(), origin=estimate.published_origin, polishes=polishes,
+                   answer=None if estimate.signals.fitness == 0.0 else estimate.T_odom_sensor.copy())
 
     @classmethod
     def unregistered(cls, stamp_ns: int, pose: np.ndarray, *, accepted: bool, fitness: float, latency_s: float,
