@@ -60,12 +60,15 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser.add_argument("--pairs", type=int, default=20, help="far pairs (10-40 m, from no history) per real set")
     parser.add_argument("--kitti", type=Path, default=SHARED_KITTI if SHARED_KITTI.is_dir() else None,
                         help="KITTI sample folder (velodyne/, poses.txt, calib.txt)")
+    parser.add_argument("--no-kitti", action="store_true", help="leave the KITTI scans out")
     parser.add_argument("--limit", type=int, help="first N scans of each sequence only")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="node parameters for the pipeline under test (dotted names)")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_real.json")
     args = parser.parse_args(argv)
+    if args.no_kitti:
+        args.kitti = None
     if args.real_sets is None and args.kitti is None:
         parser.error("no sequence: give --real-sets DIR and/or --kitti DIR")
     overrides = {}
@@ -111,8 +114,9 @@ def pairs_table(results: dict) -> str:
             "|---|---|---|---|---|---|---|"]
     for name, methods in results.items():
         for method, m in methods.items():
+            ms = "-" if m["ms_p50"] is None else f"{m['ms_p50']:.0f}"
             rows.append(f"| {name} | {method} | {m['accepted_right']} | {m['accepted_wrong']} | {m['flagged_right']} "
-                        f"| {m['flagged_wrong']} | {m['ms_p50']:.0f} |")
+                        f"| {m['flagged_wrong']} | {ms} |")
     return "\n".join(rows)
 
 
@@ -127,8 +131,9 @@ def main(argv: Optional[list[str]] = None) -> int:
             report["results"].update(run_sequences([sequence], methods))
             write_report(args.out, json_text(report))  # a long run keeps what it measured
         for name, sequence in real.items():
-            if args.pairs:
-                report["far_pairs"][name] = run_far_pairs(sequence, far_pairs(sequence, args.pairs, seed=0), methods)
+            pairs = far_pairs(sequence, args.pairs, seed=0) if args.pairs else []
+            if pairs:
+                report["far_pairs"][name] = run_far_pairs(sequence, pairs, methods)
                 write_report(args.out, json_text(report))
         print(real_table(report["results"]))
         if report["far_pairs"]:

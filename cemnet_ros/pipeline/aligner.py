@@ -6,25 +6,21 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
 1. **preprocess** (:mod:`.steps.frame`, :mod:`.steps.sweep`): deskew, drop non-finite points, crop by range, voxel grid;
    the CEM's subset and the polish's subset;
 2. **predict**: the constant-velocity pose, and how far to search around it (:class:`AdaptiveSpread`);
-3. **track** (:mod:`.steps.tracking`): the cheapest credible start first, stopping once an answer stands
-   (confirmed, and explained by the prediction or covering the scan): the prediction polished point to plane
-   against the map, where its recent errors lie within the polish's reach; then the prediction polished from
-   afar; then the CEM around the prediction against a sample of the map, its answer polished from afar; then
-   the last pose from afar, competing (:mod:`.steps.contest`);
-4. **judge** the step without ground truth (:mod:`.steps.verdict`: fitness in metres, confirmation,
-   conditioning);
-5. **recover** (:mod:`.steps.recovery`) when tracking failed or is unconfirmed (after a stamp gap it must fit
-   at the running level), on the first pair or on request: the global CEM search (yaw over the full circle,
-   metres of translation), each hypothesis polished from afar and competing with tracking's answers (steps 3
-   and 5 are one routine, :mod:`.steps.track_then_recover`, that pair mode registers with too);
-6. **commit**: a good step moves the pose, the map, the motion model and the adaptive spread; a failed one is
-   published flagged with the prediction and changes nothing else (too many in a row restart the map, where
-   :mod:`.steps.lost_streak` says); a degenerate one keeps the prediction along
-   the unconstrained directions, is flagged, and still extends the map; one chosen among near-ties is flagged
-   and moves the pose only. The step's covariance is its registration's plus the previous pose's error against
-   the map (:func:`~.steps.covariance.carried_into_step`).
+3. **register** (:mod:`.steps.registration`): the plan's starts (:mod:`.steps.starts`), cheapest first: the
+   prediction polished point to plane against the map, the prediction polished from afar, the CEM around it
+   against a sample of the map, the last pose from afar, then the global CEM search (yaw over the full circle,
+   metres of translation) and turns of the last pose; each answer measured once (:mod:`.steps.answer`);
+4. **decide** (:mod:`.steps.decision`) on the answers' evidence (:mod:`.steps.evidence`) after each stage: the
+   plan ends once an answer stands; the global search competes where the cheaper starts do not settle it, on the
+   first pair, after a failed step and on request;
+5. **commit** the outcome: an accepted step moves the pose, the map, the motion model, the adaptive spread and
+   the running fitness level; a failed one is published flagged with the prediction and changes nothing else
+   (too many in a row restart the map, where :mod:`.steps.lost_streak` says; the level stays); a degenerate one
+   keeps the prediction along the unconstrained directions, is flagged, and still extends the map; a near-tie is
+   flagged and moves the pose only. The step's covariance is its registration's plus the previous pose's error
+   against the map (:func:`~.steps.covariance.carried_into_step`).
 
-Pair mode (:mod:`.pair_mode`) runs steps 0-5 against a map of the target cloud. Poses are ``T_odom_sensor``;
+Pair mode (:mod:`.pair_mode`) runs steps 0-4 against a map of the target cloud. Poses are ``T_odom_sensor``;
 odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.
 """
 from __future__ import annotations
@@ -43,17 +39,17 @@ from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.pair_mode import PairMode
 from cemnet_ros.pipeline.steps import preprocess, refine
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.steps.alignment_step import AlignmentStep
 from cemnet_ros.pipeline.steps.covariance import carried_into_step
+from cemnet_ros.pipeline.steps.decision import Outcome
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
-from cemnet_ros.pipeline.steps.health import HealthMonitor
+from cemnet_ros.pipeline.steps.health import RunningLevel
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
 from cemnet_ros.pipeline.steps.lost_streak import LostStreak
+from cemnet_ros.pipeline.steps.metric_cem import MetricEngine, prior_registrar
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
-from cemnet_ros.pipeline.steps.recovery import Recovery, prior_registrar
+from cemnet_ros.pipeline.steps.registration import Registered, Registration
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
-from cemnet_ros.pipeline.steps.track_then_recover import RecoveryFallbacks, Registered, TrackThenRecover
-from cemnet_ros.pipeline.steps.tracking import Tracker
-from cemnet_ros.pipeline.steps.verdict import AlignmentStep, Estimate, StepJudge
 
 
 class ScanAligner:
@@ -70,11 +66,10 @@ class ScanAligner:
         self._checks = InputChecks(self.config.checks)
         self._motion = ConstantVelocity()
         self._spread = AdaptiveSpread(self.config.adaptive)
-        self._health = HealthMonitor(self.config.health)
+        self._level = RunningLevel(self.config.health.level_memory)
         self._lost = LostStreak()
-        judge = StepJudge(self.config, self._health)
-        recovery = Recovery(self.config, judge, prior_registrar(self.config, recovery_prior))
-        self._registration = TrackThenRecover(Tracker(self.config, registrar, self._spread, judge), recovery)
+        engine = MetricEngine(self.config, registrar, prior_registrar(self.config, recovery_prior))
+        self._registration = Registration(self.config, engine, self._spread)
         self._sweep = SweepDeskewer(self.config.preprocess.deskew, self._preprocessor)
         self._pairs = PairMode(self.config, self._preprocessor, self._checks, self._registration)
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
@@ -107,7 +102,7 @@ class ScanAligner:
         self._map: Optional[VoxelMap] = None
         self._motion.reset()
         self._spread.reset()
-        self._health.reset()
+        self._level.reset()
         self._pose = np.eye(4) if T_odom_sensor is None else np.asarray(T_odom_sensor, dtype=np.float64).copy()
         self._pending_recovery = ""  # why the next scan runs the global search ("" = it tracks)
         self._failures_in_a_row = 0
@@ -155,10 +150,9 @@ class ScanAligner:
             return self._start_trajectory(frame, stamp_ns, start)
         T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
         registered = self._registration.register(
-            frame, self._map, T_predicted, recover_because=self._pending_recovery, T_last=self._motion.last_pose,
-            dt_ratio=self._motion.dt_ratio(stamp_ns), effort=effort,
-            after_gap=(stamp_ns - last_stamp) * 1e-9 > self.config.recovery.gap,
-            fallbacks=RecoveryFallbacks(T_fallback=self._T_odom_last_insert, T_last=self._pose))
+            frame, self._map, T_predicted, level=self._level.level, search_because=self._pending_recovery,
+            T_last=self._pose, dt_ratio=self._motion.dt_ratio(stamp_ns), effort=effort,
+            after_gap=(stamp_ns - last_stamp) * 1e-9 > self.config.recovery.gap, T_fallback=self._T_odom_last_insert)
         return self._commit(frame, stamp_ns, T_predicted, registered, start)
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
@@ -173,11 +167,9 @@ class ScanAligner:
         self._motion.update(self._pose, stamp_ns)
         self._spread.reset()
         self._pending_recovery = "first pair"  # a single pose predicts nothing
-        step = AlignmentStep.unregistered(stamp_ns, self._pose, accepted=not restarted, fitness=1.0,
+        return AlignmentStep.unregistered(stamp_ns, self._pose, accepted=not restarted, fitness=1.0,
                                           latency_s=time.perf_counter() - start, n_points=len(frame.sampled),
-                                          reason=reason)
-        step.map_restarted = True
-        return step
+                                          reason=reason, map_restarted=True)
 
     def _restart_map(self, frame: Frame, T_odom_sensor: np.ndarray) -> None:
         """Lost: a new map from this scan at ``T_odom_sensor``; the odometry stays continuous (flagged)."""
@@ -187,69 +179,73 @@ class ScanAligner:
         self._T_odom_last_insert = T_odom_sensor.copy()
         self._pose_vs_map = np.zeros((6, 6))  # the map is this scan where it is: no error against it
         self._sweep.map_restarted(T_odom_sensor)
-        self._health.reset()
         self._pending_recovery = ""
         self._failures_in_a_row = 0
         self._lost.reset()
 
     def _commit(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, registered: Registered,
                 start: float) -> AlignmentStep:
-        """Apply a verdict: good and degenerate steps move the state, failed ones publish the prediction."""
-        estimate, previous = registered.estimate, self._pose
-        carried = self._carried(estimate, T_predicted)
+        """Apply the outcome (see the module): a failed step publishes the prediction, the others their answer."""
+        verdict, previous = registered.verdict, self._pose
+        failed = verdict.failed or registered.T_odom_sensor is None
+        covariance = self._covariance(registered, T_predicted if failed else registered.T_odom_sensor)
         restarted = False
-        if estimate.failures:
-            pose, reasons = self._failed(frame, stamp_ns, T_predicted, estimate)
-            restarted = self._failures_in_a_row == 0
+        if failed:
+            pose, reasons, restarted = self._failed(frame, stamp_ns, T_predicted, registered)
         else:
-            pose, reasons = estimate.T_odom_sensor, list(estimate.notes)
-            self._extend(frame, pose, T_predicted, estimate)
+            pose, reasons = registered.T_odom_sensor, [verdict.reason] if verdict.reason else []
+            self._extend(frame, pose, T_predicted, registered)
         self._pose = pose
         self._motion.update(pose, stamp_ns)
-        step = AlignmentStep.registered(
-            estimate, stamp_ns=stamp_ns, pose=pose, relative=np.linalg.inv(previous) @ pose,
-            covariance_inflation=self.config.health.covariance_inflation, latency_s=time.perf_counter() - start,
-            n_points=len(frame.sampled), reason="" if estimate.accepted else "; ".join(reasons),
-            recovery_reason=registered.why_recovered, polishes=registered.contest.polishes, carried=carried)
-        step.map_restarted = restarted
-        return step
+        return AlignmentStep.registered(
+            registered, stamp_ns=stamp_ns, pose=pose, relative=np.linalg.inv(previous) @ pose, covariance=covariance,
+            latency_s=time.perf_counter() - start, n_points=len(frame.sampled), reason="; ".join(reasons),
+            map_restarted=restarted)
 
-    def _carried(self, estimate: Estimate, T_predicted: np.ndarray) -> np.ndarray:
-        """What the previous pose's error against the map adds to this step's covariance; the pose published now
-        errs against the map by this registration's own error (inflated when it failed) from here on."""
-        pose = T_predicted if estimate.failures else estimate.T_odom_sensor
+    def _covariance(self, registered: Registered, pose: np.ndarray) -> np.ndarray:
+        """The covariance of the step to ``pose``: its registration's (inflated when it failed) plus what the
+        previous pose's error against the map carries into it; the pose published now errs against the map by
+        this registration's own error from here on (a restarted map resets that)."""
+        covariance = registered.covariance
+        if registered.verdict.failed:
+            covariance = covariance * self.config.health.covariance_inflation
         carried = carried_into_step(self._pose_vs_map, self._pose, pose)
-        self._pose_vs_map = estimate.published_covariance(self.config.health.covariance_inflation)
-        return carried
+        self._pose_vs_map = covariance
+        return covariance + carried
 
-    def _failed(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, estimate: Estimate
-                ) -> tuple[np.ndarray, list[str]]:
-        """A step that cannot be vouched for, flagged (the pose published and the reasons): the prediction, and
-        the next scan recovers; too many in a row restart the map from this scan, where :class:`.LostStreak`
-        says."""
+    def _failed(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, registered: Registered
+                ) -> tuple[np.ndarray, list[str], bool]:
+        """A step that cannot be vouched for, flagged (the pose published, the reasons, whether the map
+        restarted): the prediction, and the next scan sends the global search to compete; too many in a row
+        restart the map from this scan, where :class:`.LostStreak` says."""
         self._failures_in_a_row += 1
         self._pending_recovery = "the previous step failed"
-        overlaps = self._health.overlaps(estimate.signals.fitness)
-        self._lost.failed(estimate.T_odom_sensor if overlaps else None, stamp_ns)
+        leader = registered.evidence.leader
+        overlaps = leader is not None and leader.fitness >= self.config.health.min_fitness
+        self._lost.failed(registered.answer if overlaps else None, stamp_ns)
+        reason = registered.verdict.reason
         if self._failures_in_a_row < self.config.recovery.restart_after:
-            return T_predicted, [*estimate.failures, "motion prediction used"]
+            return T_predicted, [reason, "motion prediction used"], False
         pose, where = self._lost.restart_pose(T_predicted)
         self._restart_map(self._preprocessor.rescaled_if_lost(frame), pose)
-        return pose, [*estimate.failures, where,
-                      f"lost for {self.config.recovery.restart_after} scans: the map restarts from this scan"]
+        return pose, [reason, where,
+                      f"lost for {self.config.recovery.restart_after} scans: the map restarts from this scan"], True
 
-    def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, estimate: Estimate) -> None:
-        """A good (or degenerate) step: the map, the fitness level and the prediction errors take it in; a pose
-        chosen among near-ties moves the pose only (a map grown at a guess would mislead every later scan)."""
+    def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, registered: Registered) -> None:
+        """A step that is not failed: the map, the fitness level and the prediction errors take in a vouched
+        (or degenerate) one; a near-tie moves the pose only (a map grown at a guess would mislead every later
+        scan)."""
         assert self._map is not None  # a step is only committed against the map it was registered on
         self._pending_recovery = ""
         self._failures_in_a_row = 0
         self._lost.reset()
-        if estimate.tied:
+        if registered.verdict.outcome == Outcome.NEAR_TIE:
             return
-        if not estimate.recovered:  # a recovery's guess was no prediction of the motion model
+        if not registered.searched:  # a search's guess was no prediction of the motion model
             self._spread.update(np.linalg.inv(T_predicted) @ pose)
-        self._health.accept(estimate.signals.fitness)
+        leader = registered.evidence.leader
+        assert leader is not None  # a step that is not failed has an answer
+        self._level.accept(leader.fitness)
         self._map.update(apply_transform(pose, frame.dense), pose[:3, 3],
                          self._scan_cloud(frame, self._map.gicp_voxel, pose))
         self._T_odom_last_insert = pose.copy()

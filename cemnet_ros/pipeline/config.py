@@ -79,15 +79,14 @@ class HealthConfig:
                                "map of sparse scans fits ~0.2)", low=0.0, high=0.99)
     fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
                                 "level", low=0.01, high=1.0)
-    confirm_ratio: float = param(0.9, "an answer that only one start reached must fit at least this fraction of "
-                                 "the running level; below it the global search competes with it (tracking) or "
-                                 "the step fails (recovery)", low=0.0, high=1.0)
+    confirm_ratio: float = param(0.9, "an answer stands without the global search when it fits at least this "
+                                 "fraction of the running level where the prediction expects it; away from the "
+                                 "prediction it must, after the search too", low=0.0, high=1.0)
     coverage_distance: float = param(6.0, "a scan point is covered by the map when a map point lies this close "
                                      "(frame voxels)", low=0.1)
-    confirm_coverage: float = param(0.95, "an answer covering this fraction of the scan needs no rival to be "
-                                    "confirmed; tracking's answer covering less, reached from one start the "
-                                    "prediction does not explain, is checked by the global search", low=0.0,
-                                    high=1.01)
+    tie_ratio: float = param(0.95, "distinct answers whose consistency falls short of the best one's by less than "
+                             "1 - this of its fitness are a near-tie: the one next to the prediction is kept, "
+                             "flagged; with none next to it the step fails as ambiguous", low=0.01, high=1.0)
     level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
                                 low=0.0, high=0.999)
     min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
@@ -134,8 +133,6 @@ class TrackingConfig:
                         choices=TRACKING_CENTRES)
     identity_sigma: float = param(1.0, "spread of the 'identity' centre (rad and network units; paper: N(0, I))",
                                   low=1e-4)
-    tie_ratio: float = param(0.95, "distinct answers (CEM, prediction, last pose) this close in consistency are a "
-                             "near-tie: the one next to the prediction is kept, flagged", low=0.01, high=1.0)
     local_first: bool = param(True, "polish the prediction first (finely, then from afar); the CEM samples only "
                               "when no answer stands (false: the CEM first on every step, as the method alone)")
 
@@ -185,9 +182,6 @@ class RecoveryConfig:
                                  "precision)", low=32)
     gap: float = param(1.0, "after a stamp gap longer than this (s) tracking's answer must fit at "
                        "health.confirm_ratio x the running level, or the global search competes with it", low=1e-3)
-    ambiguity_ratio: float = param(0.95, "a distinct hypothesis this close in consistency makes the answer "
-                                   "ambiguous",
-                                   low=0.01, high=1.0)
     turn_yaw: float = param(90.0, "the search also polishes the last pose turned about its z axis by up to "
                             "this (deg) either way; 0 = no turns", low=0.0, high=180.0)
     turn_step: float = param(30.0, "... in steps of this (deg: about the wide polish's reach)", low=1.0, high=180.0)

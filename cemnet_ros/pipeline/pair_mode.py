@@ -1,9 +1,10 @@
 """Pair mode: the pose of each source scan in the frame of a target cloud (e.g. a latched map), no local map.
 
 The same steps as sequential mode (:mod:`.aligner`) against a map built from the target alone: check both
-clouds, then register (:mod:`.steps.track_then_recover`): track from the constant-velocity prediction of the
-source's pose, recover with the global search when there is no pose yet or tracking doubts its answer. A reused
-target (the same array) is prepared once.
+clouds, then register (:mod:`.steps.registration`): from the constant-velocity prediction of the source's pose,
+the global search competing when there is no pose yet or the cheaper starts do not settle it. A target has no
+running fitness level: an answer stands on the search's evidence (:mod:`.steps.decision`). A reused target (the
+same array) is prepared once.
 """
 from __future__ import annotations
 
@@ -16,18 +17,18 @@ import numpy as np
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.alignment_step import AlignmentStep
 from cemnet_ros.pipeline.steps.frame import Preprocessor
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
-from cemnet_ros.pipeline.steps.track_then_recover import TrackThenRecover
-from cemnet_ros.pipeline.steps.verdict import AlignmentStep
+from cemnet_ros.pipeline.steps.registration import Registration
 
 
 class PairMode:
     """Source-to-target alignment sharing the aligner's units, source checks and registration."""
 
     def __init__(self, config: AlignerConfig, preprocessor: Preprocessor, source_checks: InputChecks,
-                 registration: TrackThenRecover) -> None:
+                 registration: Registration) -> None:
         self.config = config
         self.preprocessor = preprocessor
         self.source_checks = source_checks
@@ -62,19 +63,19 @@ class PairMode:
             self._motion.reset()
         previous = self._motion.last_pose
         T_predicted, why = (np.eye(4), "no pose yet") if previous is None else (self._motion.predict(stamp_ns), "")
-        registered = self.registration.register(frame, target_map, T_predicted, recover_because=why, T_last=previous)
-        estimate = registered.estimate
-        pose = estimate.T_odom_sensor
-        if not estimate.failures:
+        registered = self.registration.register(frame, target_map, T_predicted, level=None, search_because=why,
+                                                T_last=previous)
+        failed = registered.verdict.failed
+        pose = T_predicted if registered.T_odom_sensor is None else registered.T_odom_sensor
+        if not failed:
             self._motion.update(pose, stamp_ns)
         self._last_stamp = stamp_ns
         self.source_checks.passed(admitted)
+        covariance = registered.covariance * (self.config.health.covariance_inflation if failed else 1.0)
         step = AlignmentStep.registered(
-            estimate, stamp_ns=stamp_ns, pose=pose,
-            relative=None if previous is None else np.linalg.inv(previous) @ pose,
-            covariance_inflation=self.config.health.covariance_inflation, latency_s=time.perf_counter() - start,
-            n_points=len(frame.sampled), reason="; ".join(estimate.failures + estimate.notes),
-            recovery_reason=registered.why_recovered, polishes=registered.contest.polishes)
+            registered, stamp_ns=stamp_ns, pose=pose,
+            relative=None if previous is None else np.linalg.inv(previous) @ pose, covariance=covariance,
+            latency_s=time.perf_counter() - start, n_points=len(frame.sampled), reason=registered.verdict.reason)
         step.warnings = admitted.warnings + target_warnings
         return step
 

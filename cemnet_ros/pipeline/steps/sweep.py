@@ -19,9 +19,9 @@ import numpy as np
 from cemnet_ros.core.geometry import apply_transform, se3_exp
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.alignment_step import AlignmentStep
 from cemnet_ros.pipeline.steps.deskew import deskew
 from cemnet_ros.pipeline.steps.frame import Preprocessor
-from cemnet_ros.pipeline.steps.verdict import AlignmentStep
 
 SkewedScan = tuple[np.ndarray, np.ndarray]  # points, times relative to the reference (s)
 Velocity = Callable[[], Optional[np.ndarray]]  # the motion model's twist (6,) per second, None: none yet

@@ -1,0 +1,105 @@
+"""The decision: can the node vouch for this scan's leading answer? One function over one record of evidence.
+
+The rules, in the order :func:`decide` applies them (the first that applies decides; the thresholds are
+``health.*`` parameters, docs/node.md says what each one's figures were measured on):
+
+1. **No answer, or no overlap**: no map near the guess, too few point-to-plane pairs, a fitness below
+   ``min_fitness`` or below ``fitness_drop`` x the running level: *failed* (the prediction is published).
+2. **The search must compete first** where the caller says so (the first pair, after a failed step, on request).
+3. **Near-tie**: distinct answers within ``tie_ratio`` in consistency. The global search competes first; then the
+   one next to the prediction is kept as a *near-tie* (flagged, the map does not take it in), and with none next
+   to it the step is *ambiguous* (failed).
+4. **Degenerate**: the view leaves a direction unconstrained (conditioning below ``min_conditioning``): flagged,
+   the prediction kept along that direction.
+5. **Confirmed where expected**: the leader fits at ``confirm_ratio`` x the running level and the prediction
+   explains it or it lies within the prediction's spread: it stands without further starts. Anything else waits
+   for the global search: an answer the prediction does not vouch for needs the independent starts to have found
+   nothing as consistent; after them it stands when it is confirmed, or when it lies within the prediction's
+   spread and still overlaps (rule 1) and the prediction was no extrapolation over a stamp gap. A first pair has
+   no level: it stands when the search found no near-tie.
+6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
+   flat valley) waits for its rotational neighbours to compete (a near-tie then flags it, rule 3).
+7. Otherwise: *accepted*.
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from cemnet_ros.pipeline.config import HealthConfig
+from cemnet_ros.pipeline.steps.evidence import Evidence
+
+
+class Outcome(str, enum.Enum):
+    """What a scan's registration comes to."""
+
+    ACCEPTED = "accepted"  # vouched for: the pose, the map, the motion model and the level take it in
+    DEGENERATE = "degenerate"  # flagged: the prediction kept along the free direction; the map takes it in
+    NEAR_TIE = "near-tie"  # flagged: the answer next to the prediction among equals; the pose only moves
+    AMBIGUOUS = "ambiguous"  # failed: equals, none next to the prediction
+    FAILED = "failed"  # the prediction is published, flagged
+    UNSETTLED = "unsettled"  # more starts must compete first (``Verdict.needs``)
+
+
+class Needs(str, enum.Enum):
+    """The starts an unsettled verdict waits for."""
+
+    SEARCH = "search"
+    NEIGHBOURS = "neighbours"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """An outcome and why (empty for an accepted step); ``needs``: the starts an unsettled one waits for."""
+
+    outcome: Outcome
+    reason: str = ""
+    needs: Needs | None = None
+
+    @property
+    def vouched(self) -> bool:
+        return self.outcome == Outcome.ACCEPTED
+
+    @property
+    def failed(self) -> bool:
+        """The answer is not published: the prediction is, flagged."""
+        return self.outcome in (Outcome.FAILED, Outcome.AMBIGUOUS, Outcome.UNSETTLED)
+
+
+def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
+    """The verdict on ``evidence`` (see the module for the rules)."""
+    leader, expected = evidence.leader, evidence.expectation
+    if leader is None:
+        return Verdict(Outcome.FAILED, evidence.missing)
+    level = expected.level
+    if not leader.constrained:
+        return Verdict(Outcome.FAILED, f"only {leader.n_pairs} point-to-plane pairs")
+    if leader.fitness < rules.min_fitness:
+        return Verdict(Outcome.FAILED, f"low fitness {leader.fitness:.3f} < {rules.min_fitness:.3f}")
+    if level is not None and leader.fitness < rules.fitness_drop * level:
+        return Verdict(Outcome.FAILED, f"fitness {leader.fitness:.3f} fell below {rules.fitness_drop:.2f} x its "
+                                       f"running level {level:.3f}")
+    if expected.search_because and not evidence.searched:
+        return Verdict(Outcome.UNSETTLED, expected.search_because, Needs.SEARCH)
+    if evidence.tied:
+        summary = f"{len(evidence.tied)} distinct answers within {rules.tie_ratio:.2f} in consistency"
+        if not evidence.searched:
+            return Verdict(Outcome.UNSETTLED, f"near-tie: {summary}", Needs.SEARCH)
+        if evidence.near:
+            return Verdict(Outcome.NEAR_TIE, f"symmetric scene: {summary}, the one next to the motion prediction kept")
+        return Verdict(Outcome.AMBIGUOUS, f"ambiguous: {summary}, none next to the motion prediction")
+    if leader.signals.conditioning < rules.min_conditioning:
+        return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
+                                           "prediction kept along the unconstrained direction")
+    confirmed = level is not None and leader.fitness >= rules.confirm_ratio * level
+    if not (confirmed and (leader.explained or evidence.near)):
+        why = (f"fitness {leader.fitness:.3f} < {rules.confirm_ratio:.2f} x its running level {level:.3f}"
+               if level is not None and not confirmed else "no running level yet" if level is None
+               else f"{evidence.offset[0]:.2f} m from the motion prediction")
+        if not evidence.searched:
+            return Verdict(Outcome.UNSETTLED, f"unconfirmed: {why}", Needs.SEARCH)
+        if not (confirmed or level is None or (evidence.near and not expected.after_gap)):
+            return Verdict(Outcome.FAILED, f"unconfirmed: {why}, away from the motion prediction")
+    if leader.signals.conditioning < rules.neighbour_conditioning and not evidence.neighbours_checked:
+        return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)
+    return Verdict(Outcome.ACCEPTED)

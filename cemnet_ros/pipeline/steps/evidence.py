@@ -1,0 +1,87 @@
+"""What the decision reads about one scan (:mod:`.decision`), computed once from its answers: one frozen record.
+
+- the **leader**: the most consistent answer; among distinct answers whose consistency falls short of the best
+  one's by less than ``(1 - health.tie_ratio)`` x its fitness (a *near-tie*: the scene cannot settle them) the one
+  nearest the prediction, so that a distant answer never replaces a near one of similar consistency;
+- its **rival**: the most consistent answer distinct from it, and the **margin** it leads by;
+- where it lies against the **expectation**: its offset from the prediction along the directions the scene
+  constrains, within ``near`` or not, and the running fitness **level** of the vouched steps;
+- which starts have competed: the global **search** (independent of the prediction), the leader's rotational
+  **neighbours** (its basin checked on a weakly constrained view).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+from cemnet_ros.pipeline.config import HealthConfig
+from cemnet_ros.pipeline.steps.answer import Answer, distinct
+from cemnet_ros.pipeline.steps.covariance import keep_prediction_along
+from cemnet_ros.pipeline.steps.health import disagreement
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """What a scan's answers are judged against besides one another."""
+
+    T_predicted: np.ndarray  # the motion model's pose (the guess, when the prediction left the map)
+    near: tuple[float, float]  # (m, rad): how far from the prediction an answer is still the prediction's
+    level: Optional[float]  # the running fitness of the vouched steps (None: none yet, e.g. the first pair)
+    search_because: str = ""  # why the global search must compete whatever the answers ("": only if they need it)
+    after_gap: bool = False  # the time step was longer than recovery.gap: the prediction is an extrapolation
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """One scan's answers as the decision sees them (see the module)."""
+
+    expectation: Expectation
+    leader: Optional[Answer]  # None: no answer at all (``missing`` says why)
+    tied: tuple[Answer, ...]  # the distinct near-ties, the leader among them (empty: no near-tie)
+    rival: Optional[Answer]  # the most consistent answer distinct from the leader
+    offset: tuple[float, float]  # (m, rad) of the leader from the prediction along the constrained directions
+    searched: bool  # the global search's hypotheses have competed
+    neighbours_checked: bool  # the leader's rotational neighbours have competed
+    missing: str = ""
+
+    @classmethod
+    def of(cls, answers: Sequence[Answer], expectation: Expectation, rules: HealthConfig, *, searched: bool,
+           neighbours_checked: bool, missing: str = "") -> "Evidence":
+        """The record of ``answers`` (see the module)."""
+        if not answers:
+            return cls(expectation, None, (), None, (np.inf, np.inf), searched, neighbours_checked, missing)
+        ranked = sorted(answers, key=lambda a: -a.consistency)
+        best = ranked[0]
+        margin = (1.0 - rules.tie_ratio) * best.fitness
+        tied = [best]
+        for answer in ranked[1:]:
+            if answer.consistency >= best.consistency - margin and all(
+                    distinct(answer.T_odom_sensor, kept.T_odom_sensor) for kept in tied):
+                tied.append(answer)
+        offsets = [offset_along_constrained(a, expectation.T_predicted, rules.min_conditioning) for a in tied]
+        nearest = int(np.argmin([metres for metres, _ in offsets]))
+        leader = tied[nearest]
+        rival = next((a for a in ranked if distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)
+        return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, offsets[nearest], searched,
+                   neighbours_checked, missing)
+
+    @property
+    def near(self) -> bool:
+        """The leader lies within ``near`` of the prediction along the constrained directions."""
+        return self.offset[0] <= self.expectation.near[0] and self.offset[1] <= self.expectation.near[1]
+
+    @property
+    def margin(self) -> float:
+        """The consistency the leader leads its rival by (inf: no rival)."""
+        if self.leader is None or self.rival is None:
+            return np.inf
+        return self.leader.consistency - self.rival.consistency
+
+
+def offset_along_constrained(answer: Answer, T_reference: np.ndarray, min_conditioning: float) -> tuple[float, float]:
+    """(metres, radians) of ``answer`` from ``T_reference`` along the directions its view constrains."""
+    free = answer.conditioning.degenerate_basis(min_conditioning)
+    return disagreement(T_reference, keep_prediction_along(free, answer.conditioning.length, T_reference,
+                                                           answer.T_odom_sensor))

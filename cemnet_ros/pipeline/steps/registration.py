@@ -1,0 +1,112 @@
+"""Registering one frame against one map (steps 3 to 5 of the recipe in :mod:`..aligner`): the plan's starts
+(:mod:`.starts`), cheapest first, each polished and measured (:mod:`.answer`), until the decision
+(:mod:`.decision`) on their evidence (:mod:`.evidence`) settles; then the pose and covariance to publish.
+
+One loop for tracking and recovery: the global search is the plan's fifth stage, reached when no cheaper answer
+stands (or at once where the caller says why). Sequential mode (:mod:`..aligner`) and pair mode
+(:mod:`..pair_mode`) register through it alike; what they commit differs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
+from cemnet_ros.pipeline.steps.contest import Contest
+from cemnet_ros.pipeline.steps.covariance import covariance_from_hessian, flat_covariance, keep_prediction_along
+from cemnet_ros.pipeline.steps.decision import Needs, Outcome, Verdict, decide
+from cemnet_ros.pipeline.steps.evidence import Evidence
+from cemnet_ros.pipeline.steps.frame import Frame
+from cemnet_ros.pipeline.steps.health import disagreement
+from cemnet_ros.pipeline.steps.metric_cem import MetricEngine
+from cemnet_ros.pipeline.steps.polish import Polisher
+from cemnet_ros.pipeline.steps.starts import Starts
+
+PREDICTION_SPREADS = 3.0  # an answer within this many tracking spreads of the prediction is the prediction's
+LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
+EARLY = (Outcome.ACCEPTED, Outcome.DEGENERATE, Outcome.NEAR_TIE, Outcome.AMBIGUOUS)  # end the plan before its end
+
+
+@dataclass(frozen=True)
+class Registered:
+    """A frame's registration, before it is committed: the verdict, the evidence it was decided on, the pose a
+    step that is not failed publishes (the leader; degenerate: with the prediction kept along the free
+    directions), its covariance (ROS order; a failed step's inflated by the committer), whether the global search
+    ran and why, and the polishes it cost."""
+
+    verdict: Verdict
+    evidence: Evidence
+    T_odom_sensor: Optional[np.ndarray]  # None: no answer at all
+    covariance: np.ndarray
+    searched: bool
+    why_searched: str
+    polishes: int
+
+    @property
+    def answer(self) -> Optional[np.ndarray]:
+        """The leading answer's pose, as registered (None: none)."""
+        leader = self.evidence.leader
+        return None if leader is None else leader.T_odom_sensor
+
+
+class Registration:
+    """The plan run against one map until the decision settles (see the module)."""
+
+    def __init__(self, config: AlignerConfig, engine: MetricEngine, spread: AdaptiveSpread) -> None:
+        self.config, self.engine, self.spread = config, engine, spread
+
+    def register(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, *, level: Optional[float],
+                 search_because: str = "", T_last: Optional[np.ndarray] = None, dt_ratio: float = 1.0,
+                 effort: float = 1.0, after_gap: bool = False, T_fallback: Optional[np.ndarray] = None
+                 ) -> Registered:
+        """``frame`` registered against ``target_map`` near ``T_predicted``.
+
+        ``level``: the running fitness of the vouched steps (None: none); ``search_because``: why the global search
+        must compete whatever tracking finds; ``T_last``: the last pose; ``dt_ratio``: this time step over the usual
+        one (it widens the prediction's spread); ``effort`` (0, 1]: the share of the polishes' and the search's
+        budgets (a live node behind its input); ``after_gap``: the time step was longer than ``recovery.gap``;
+        ``T_fallback``: where to search when the map has no points near the prediction.
+        """
+        contest = Contest(Polisher(self.config, frame, target_map, effort), T_predicted)
+        starts = Starts(self.config, self.engine, self.spread, dt_ratio, T_last, T_fallback)
+        rotation, translation = self.spread.spread(dt_ratio)
+        near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
+        stages = starts.plan(contest, searched_first=bool(search_because))
+        evidence, verdict, why = None, None, search_because
+        while verdict is None or verdict.outcome not in EARLY:
+            if verdict is not None and verdict.needs == Needs.NEIGHBOURS:
+                assert evidence is not None and evidence.leader is not None  # a verdict that needs them has one
+                starts.neighbours(contest, evidence.leader.T_odom_sensor)
+            elif stages:
+                if verdict is not None and not why and stages[0] == starts.search:
+                    why = f"tracking failed ({verdict.reason})"
+                stages.pop(0)(contest)
+            else:
+                break
+            evidence = contest.evidence(near, level, self.config.health, search_because, after_gap)
+            verdict = decide(evidence, self.config.health)
+        assert evidence is not None and verdict is not None  # every plan has a stage
+        prediction_std = self.config.recovery.radius if contest.searched else translation
+        return Registered(verdict, evidence, *self._published(evidence, verdict, prediction_std, frame),
+                          contest.searched, why, contest.polishes)
+
+    def _published(self, evidence: Evidence, verdict: Verdict, prediction_std: float, frame: Frame
+                   ) -> tuple[Optional[np.ndarray], np.ndarray]:
+        """The pose a step that is not failed publishes, and the registration's covariance; the free directions
+        keep the prediction's variance (``prediction_std`` m)."""
+        leader, rules = evidence.leader, self.config.health
+        if leader is None:
+            return None, flat_covariance(self.config.preprocess.cem_radius * frame.scale + prediction_std, np.pi)
+        covariance = covariance_from_hessian(leader.conditioning, leader.residual_variance, prediction_std ** 2,
+                                             rules.min_conditioning)
+        T_published = leader.T_odom_sensor
+        T_predicted = evidence.expectation.T_predicted
+        # The replacement is linear in the difference: a guess degrees away (a search's) would be meaningless.
+        if verdict.outcome == Outcome.DEGENERATE and disagreement(T_predicted, T_published)[1] < LINEAR_LIMIT:
+            T_published = keep_prediction_along(leader.conditioning.degenerate_basis(rules.min_conditioning),
+                                                leader.conditioning.length, T_predicted, T_published)
+        return T_published, covariance

@@ -1,0 +1,125 @@
+"""The decision's rules (cemnet_ros.pipeline.steps.decision) and the evidence record they read, on hand-made answers."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from street_scene import make_transform
+
+from cemnet_ros.pipeline.config import HealthConfig
+from cemnet_ros.pipeline.steps.answer import Answer, Origin
+from cemnet_ros.pipeline.steps.covariance import Conditioning
+from cemnet_ros.pipeline.steps.decision import Needs, Outcome, decide
+from cemnet_ros.pipeline.steps.evidence import Evidence, Expectation
+from cemnet_ros.pipeline.steps.health import Signals
+
+RULES = HealthConfig()
+LEVEL = 0.6
+NEAR = (0.5, 0.1)  # m, rad
+
+
+def at(x: float, yaw_deg: float = 0.0) -> np.ndarray:
+    return make_transform(yaw=np.radians(yaw_deg), t=(x, 0.0, 0.0))
+
+
+def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, conditioning: float = 0.1,
+           explained: bool = False, pairs: int = 500, yaw_deg: float = 0.0) -> Answer:
+    values = np.array([conditioning, 0.5, 0.6, 0.7, 0.8, 1.0])
+    return Answer(at(x, yaw_deg), Origin.PREDICTION, Signals(fitness, 0.0, 0.0, conditioning, 0.0, coverage),
+                  Conditioning(values, np.eye(6), 10.0), 1e-4, pairs, explained)
+
+
+def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", after_gap=False,
+             missing="") -> Evidence:
+    expectation = Expectation(at(0.0), NEAR, level, because, after_gap)
+    return Evidence.of(list(answers), expectation, RULES, searched=searched, neighbours_checked=neighbours,
+                       missing=missing)
+
+
+def test_no_answer_or_no_overlap_fails():
+    assert decide(evidence(missing="no map points near the guess"), RULES).reason == "no map points near the guess"
+    assert decide(evidence(answer(pairs=3)), RULES).outcome == Outcome.FAILED
+    assert decide(evidence(answer(fitness=RULES.min_fitness - 0.01), level=None, searched=True),
+                  RULES).outcome == Outcome.FAILED
+    below = decide(evidence(answer(fitness=RULES.fitness_drop * LEVEL - 0.01), searched=True), RULES)
+    assert below.outcome == Outcome.FAILED and "running level" in below.reason
+
+
+def test_an_answer_confirmed_where_the_prediction_expects_it_stands_without_the_search():
+    assert decide(evidence(answer(explained=True)), RULES).outcome == Outcome.ACCEPTED
+    assert decide(evidence(answer(x=0.3)), RULES).outcome == Outcome.ACCEPTED  # within the spread
+
+
+def test_a_confirmed_answer_away_from_the_prediction_waits_for_the_search_and_then_stands():
+    far = answer(x=3.0)
+    waiting = decide(evidence(far), RULES)
+    assert waiting.outcome == Outcome.UNSETTLED and waiting.needs == Needs.SEARCH
+    assert decide(evidence(far, searched=True), RULES).outcome == Outcome.ACCEPTED
+
+
+def test_an_unconfirmed_answer_stands_after_the_search_only_next_to_a_prediction_it_can_trust():
+    low = RULES.confirm_ratio * LEVEL - 0.02
+    assert decide(evidence(answer(fitness=low, explained=True)), RULES).needs == Needs.SEARCH
+    assert decide(evidence(answer(fitness=low), searched=True), RULES).outcome == Outcome.ACCEPTED
+    assert decide(evidence(answer(fitness=low), searched=True, after_gap=True), RULES).outcome == Outcome.FAILED
+    away = decide(evidence(answer(x=3.0, fitness=low), searched=True), RULES)
+    assert away.outcome == Outcome.FAILED and "away from the motion prediction" in away.reason
+
+
+def test_a_reason_given_makes_the_search_compete_first():
+    waiting = decide(evidence(answer(explained=True), because="the previous step failed"), RULES)
+    assert waiting.outcome == Outcome.UNSETTLED and waiting.reason == "the previous step failed"
+    assert decide(evidence(answer(explained=True), because="x", searched=True), RULES).outcome == Outcome.ACCEPTED
+
+
+def test_without_a_running_level_the_search_decides():
+    assert decide(evidence(answer(), level=None), RULES).needs == Needs.SEARCH
+    assert decide(evidence(answer(), level=None, searched=True), RULES).outcome == Outcome.ACCEPTED
+
+
+def test_near_ties_wait_for_the_search_then_keep_the_one_next_to_the_prediction_or_fail_as_ambiguous():
+    margin = (1.0 - RULES.tie_ratio) * LEVEL
+    near, far = answer(x=0.2, fitness=LEVEL - margin / 2), answer(x=5.0)
+    assert decide(evidence(near, far), RULES).needs == Needs.SEARCH
+    tie = decide(evidence(near, far, searched=True), RULES)
+    assert tie.outcome == Outcome.NEAR_TIE and tie.failed is False and tie.vouched is False
+    both_far = decide(evidence(answer(x=4.0, fitness=LEVEL - margin / 2), far, searched=True), RULES)
+    assert both_far.outcome == Outcome.AMBIGUOUS and both_far.failed
+    clear = decide(evidence(answer(x=0.2, explained=True), answer(x=5.0, fitness=LEVEL - 2 * margin)), RULES)
+    assert clear.outcome == Outcome.ACCEPTED
+
+
+def test_a_direction_the_view_does_not_constrain_makes_the_step_degenerate():
+    verdict = decide(evidence(answer(conditioning=RULES.min_conditioning / 2, explained=True)), RULES)
+    assert verdict.outcome == Outcome.DEGENERATE and not verdict.failed and not verdict.vouched
+
+
+def test_a_weakly_constrained_view_waits_for_its_neighbours():
+    weak = answer(conditioning=(RULES.min_conditioning + RULES.neighbour_conditioning) / 2, explained=True)
+    assert decide(evidence(weak), RULES).needs == Needs.NEIGHBOURS
+    assert decide(evidence(weak, neighbours=True), RULES).outcome == Outcome.ACCEPTED
+
+
+def test_the_leader_among_near_ties_is_the_one_nearest_the_prediction_and_its_rival_the_best_other():
+    best_far, near = answer(x=4.0, fitness=0.62), answer(x=0.3, fitness=0.61)
+    record = evidence(best_far, near, answer(x=9.0, fitness=0.2))
+    assert record.leader is near and record.rival is best_far and len(record.tied) == 2
+    assert record.margin == pytest.approx(near.consistency - best_far.consistency)
+    alone = evidence(answer(x=0.0))
+    assert alone.rival is None and alone.margin == np.inf and alone.tied == ()
+
+
+def test_answers_closer_than_the_vouched_precision_are_one_and_coverage_ranks_them():
+    same = evidence(answer(x=0.0, fitness=0.6), answer(x=0.05, fitness=0.59))
+    assert same.tied == () and same.rival is None
+    covering = answer(x=2.0, fitness=0.55, coverage=1.0)
+    record = evidence(answer(x=0.0, fitness=0.6, coverage=0.8), covering)
+    assert record.leader is covering  # consistency: 0.55 against 0.6 - 0.2
+
+
+def test_the_offset_from_the_prediction_ignores_the_directions_the_view_leaves_free():
+    corridor = answer(x=3.0, conditioning=1e-6)  # eigenvector 0 (rotation about x) is free: x stays constrained
+    assert evidence(corridor).offset[0] == pytest.approx(3.0)
+    values = np.array([1e-6, 0.5, 0.6, 0.7, 0.8, 1.0])
+    free_x = Answer(at(3.0), Origin.PREDICTION, Signals(LEVEL, 0, 0, 1e-6, 0, 1.0),
+                    Conditioning(values, np.roll(np.eye(6), 3, axis=1), 10.0), 1e-4, 500, False)
+    assert evidence(free_x).offset[0] == pytest.approx(0.0, abs=1e-9) and evidence(free_x).near
