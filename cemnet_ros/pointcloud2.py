@@ -6,6 +6,11 @@ dataclasses of ``rosbags``: only the attributes ``height``, ``width``, ``fields`
 
 Integer x/y/z fields are rejected rather than converted: their unit (millimetres? raw ticks?) is not part of the
 message, so a silent cast would give plausible-looking but wrong geometry.
+
+**No-returns** are dropped, with their times: rows with a NaN or inf coordinate (the organised clouds of Ouster,
+Velodyne and RoboSense), and rows exactly at the origin, x = y = z = 0 (Hesai's and Livox's drivers publish a
+beam that saw nothing as a point at distance 0: a sensor cannot measure its own origin). docs/sensors.md cites
+the drivers' sources.
 """
 from __future__ import annotations
 
@@ -42,11 +47,13 @@ class CloudError(ValueError):
 
 @dataclass
 class CloudReport:
-    """What :func:`decode_xyz` found: total points in the message and how many were dropped as non-finite."""
+    """What :func:`decode_xyz` found: total points in the message and how many were dropped as no-returns
+    (non-finite, or exactly at the origin)."""
 
     n_total: int
     n_valid: int
     n_nonfinite: int
+    n_origin: int = 0  # finite rows at exactly (0, 0, 0): a driver's no-returns (Hesai, Livox)
 
 
 @dataclass
@@ -69,21 +76,30 @@ def as_bytes(data: Any) -> np.ndarray:
 
 
 def decode_xyz(msg: Any) -> Tuple[np.ndarray, CloudReport]:
-    """Return the finite x, y, z of a PointCloud2 as an (n, 3) float64 array, plus a :class:`CloudReport`.
+    """Return the measured x, y, z of a PointCloud2 as an (n, 3) float64 array, plus a :class:`CloudReport`.
 
     Handles any field offsets, point_step/row_step padding, float32/float64, either endianness and organised
     clouds (height > 1) with NaN or inf holes; ``is_dense`` is not trusted (drivers set it wrongly), every point
-    is tested. Raises :class:`CloudError` when the cloud is empty, lacks x/y/z, has
-    non-float x/y/z, a point_step or row_step too small for its fields, data shorter than row_step * height, or
-    no finite point at all.
+    is tested. No-returns are dropped: non-finite rows and rows at exactly (0, 0, 0) (module docstring). Raises
+    :class:`CloudError` when the cloud is empty, lacks x/y/z, has non-float x/y/z, a point_step or row_step too
+    small for its fields, data shorter than row_step * height, or no measured point at all (kind ``no_finite``).
     """
     points, _ = _xyz_rows(msg)
-    finite = np.isfinite(points).all(axis=1)
-    n_valid = int(finite.sum())
-    report = CloudReport(n_total=len(points), n_valid=n_valid, n_nonfinite=len(points) - n_valid)
+    finite, measured = _measured(points)
+    n_valid = int(measured.sum())
+    n_nonfinite = len(points) - int(finite.sum())
+    report = CloudReport(n_total=len(points), n_valid=n_valid, n_nonfinite=n_nonfinite,
+                         n_origin=len(points) - n_nonfinite - n_valid)
     if n_valid == 0:
-        raise CloudError("no_finite", f"cloud has no finite point ({report.n_total} non-finite)")
-    return (points if n_valid == len(points) else points[finite]), report
+        raise CloudError("no_finite", f"cloud has no finite point off the origin ({report.n_nonfinite} non-finite, "
+                                      f"{report.n_origin} at (0, 0, 0): no-returns)")
+    return (points if n_valid == len(points) else points[measured]), report
+
+
+def _measured(points: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(finite, measured) row masks of (n, 3) points: measured = finite and not exactly at the origin."""
+    finite = np.isfinite(points).all(axis=1)
+    return finite, finite & np.any(points != 0.0, axis=1)
 
 
 def _xyz_rows(msg: Any) -> Tuple[np.ndarray, np.ndarray]:
@@ -133,7 +149,7 @@ def _xyz_views(msg: Any, buf: np.ndarray) -> List[np.ndarray]:
 def decode_point_times(msg: Any, stamp_ns: Optional[int] = None) -> Optional[np.ndarray]:
     """Per-point times of a PointCloud2 as float64 seconds relative to its stamp, or None without a time field.
 
-    Aligned with :func:`decode_xyz`'s points (the same rows with non-finite x, y or z dropped). The field is the
+    Aligned with :func:`decode_xyz`'s points (the same rows, no-returns dropped). The field is the
     first of ``t``, ``time``, ``offset_time``, ``timestamp`` present
     (:data:`~cemnet_ros.point_times.TIME_FIELDS`); its unit is read as
     :func:`~cemnet_ros.point_times.normalize_point_times` documents (integers: ns relative to the stamp;
@@ -157,18 +173,18 @@ def decode_point_times(msg: Any, stamp_ns: Optional[int] = None) -> Optional[np.
     dtype = np.dtype((">" if msg.is_bigendian else "<") + _NUMPY_TYPES[f.datatype])
     raw = np.ndarray((height, width), dtype=dtype, buffer=buf, offset=int(f.offset),
                      strides=(row_step, point_step)).reshape(-1)
-    finite = np.isfinite(points).all(axis=1)
+    _, measured = _measured(points)
     if stamp_ns is None:
         stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
     try:
-        return normalize_point_times(raw[finite], stamp_ns, name)
+        return normalize_point_times(raw[measured], stamp_ns, name)
     except TimeFieldError as exc:
         raise CloudError("time_field", str(exc)) from exc
 
 
 @dataclass
 class DecodedScan:
-    """What :func:`decode_scan` gives: the finite points, their report, and the point times when asked for."""
+    """What :func:`decode_scan` gives: the measured points, their report, and the point times when asked for."""
 
     points: np.ndarray
     report: CloudReport

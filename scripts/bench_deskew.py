@@ -7,6 +7,11 @@ Each drive (:func:`cemnet_ros.data.skewed.skewed_sequence`, seeds ``--seed + k``
 per-point times; only ``AlignerConfig.deskew`` differs. ``--ideal`` adds the same drives cast instantaneously
 (no skew, deskew off): the floor deskewing can reach.
 
+``--layouts`` runs the same drives through ROS 2 drivers' PointCloud2 layouts (``benchmarks/sensor_layouts.py``,
+docs/sensors.md): each scan is written as the driver publishes it (its stamp's place in the sweep, its time field,
+its no-returns), serialized and decoded by the node's own path (``cemnet_ros.ros.scans.decode``); "off" aligns the
+decoded points without deskewing (as with a driver that publishes no times), "on" with the decoded times.
+
 Metrics: ATE = position RMSE with both trajectories expressed in their first pose's frame (as
 bench_robustness.py), ATE aligned = after the best rigid alignment, RPE = per-step relative translation (m) and
 rotation (deg) error, ms = wall time of ``process`` (median / p90), flagged = steps not accepted.
@@ -14,6 +19,7 @@ rotation (deg) error, ms = wall time of ``process`` (median / p90), flagged = st
     python scripts/bench_deskew.py                     # 3 drives x 50 scans
     python scripts/bench_deskew.py --quick             # 1 drive x 12 small scans (smoke run)
     python scripts/bench_deskew.py --drives 5 --scans 60 --out results/deskew_5x60.json
+    python scripts/bench_deskew.py --layouts all       # the five drivers' layouts, the plain arrays beside them
 """
 from __future__ import annotations
 
@@ -135,6 +141,53 @@ def write_json(path: Path, meta: dict, drives: list[dict]) -> None:
     write_report(path, json_text({"meta": meta, "drives": drives, "summary": summarize(drives) if drives else {}}))
 
 
+def layout_sequence(sequence: SkewedSequence, layout_name: str, lidar: LidarModel) -> SkewedSequence:
+    """``sequence`` as the node decodes it from the driver layout ``layout_name``: its points (no-returns dropped)
+    and their times, read back from CDR bytes by :func:`cemnet_ros.ros.scans.decode`."""
+    from benchmarks.sensor_layouts import LAYOUTS, decoded, driver_clouds
+
+    scans = [decoded(cloud) for cloud in driver_clouds(LAYOUTS[layout_name], sequence, lidar)]
+    unusable = [scan.warnings for scan in scans if scan.times is None or scan.warnings]
+    if unusable:
+        raise RuntimeError(f"{layout_name}: the node could not use the time field: {unusable[0]}")
+    return SkewedSequence([s.points for s in scans], [s.times for s in scans], sequence.poses,
+                          [s.stamp_ns for s in scans], {**sequence.info, "layout": layout_name})
+
+
+def run_layouts(args: argparse.Namespace, lidar: LidarModel, seeds: list[int]) -> dict:
+    """Every drive in every layout of ``args.layouts`` (and as plain arrays, per stamp placement): off and on."""
+    from benchmarks.sensor_layouts import LAYOUTS
+
+    results: dict = {}
+    for k, seed in enumerate(seeds):
+        for stamp_at in sorted({LAYOUTS[name].stamp_at for name in args.layouts}):
+            sequence = skewed_sequence(args.scans, seed=seed, lidar=lidar, stamp_at=stamp_at,
+                                       progress=lambda it: progress(it, f"drive {k}: ray-cast"))
+            names = [f"arrays, stamp at {stamp_at:g}"] + [n for n in args.layouts if LAYOUTS[n].stamp_at == stamp_at]
+            for name in names:
+                seq = sequence if name.startswith("arrays") else layout_sequence(sequence, name, lidar)
+                modes = {mode: run_drive(seq, mode == "on", f"{name}, drive {k}: deskew {mode}") for mode in MODES}
+                on, off = modes["on"]["ate_m"], modes["off"]["ate_m"]
+                results.setdefault(name, []).append({"index": k, "seed": seed, **seq.info, "truth": seq.poses,
+                                                     "modes": modes,
+                                                     "ate_ratio_on_off": on / off if on is not None and off else None})
+                log(f"{name}, drive {k} (seed {seed}): ATE off {_f(off)} m, on {_f(on)} m")
+    return results
+
+
+def layouts_table(results: dict) -> str:
+    """One row per layout: the means over its drives, off and on."""
+    lines = ["| layout | drives | ATE off (m) | ATE on (m) | on / off | worst drive on / off | RPE on (m, deg) | "
+             "flagged off / on |", "|---|---|---|---|---|---|---|---|"]
+    for name, drives in results.items():
+        s = summarize(drives)
+        lines.append(f"| {name} | {len(drives)} | {_f(s['off']['ate_m'])} | {_f(s['on']['ate_m'])} | "
+                     f"{_f(s['ate_ratio_on_off'], '.2f')} | {_f(s['ate_ratio_worst'], '.2f')} | "
+                     f"{_f(s['on']['rpe_trans_mean_m'], '.4f')}, {_f(s['on']['rpe_rot_mean_deg'])} | "
+                     f"{s['off']['flagged']} / {s['on']['flagged']} |")
+    return "\n".join(lines)
+
+
 def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help=f"tiny sizes for a smoke run: {QUICK}")
@@ -146,8 +199,20 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser.add_argument("--stamp-at", type=float, default=0.0,
                         help="where the stamp lies in the sweep: 0 = start (Ouster), 1 = end (Velodyne)")
     parser.add_argument("--ideal", action="store_true", help="also run unskewed (instantaneous) scans")
+    parser.add_argument("--layouts", nargs="+", metavar="NAME",
+                        help="run the drives through these drivers' PointCloud2 layouts (ouster velodyne hesai livox "
+                             "robosense, or all); each uses its driver's stamp placement (--stamp-at is ignored)")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_deskew.json", help="JSON output")
     args = parser.parse_args(argv)
+    if args.layouts:
+        from benchmarks.sensor_layouts import LAYOUTS
+
+        args.layouts = list(LAYOUTS) if args.layouts == ["all"] else args.layouts
+        unknown = sorted(set(args.layouts) - set(LAYOUTS))
+        if unknown:
+            parser.error(f"unknown layouts {unknown} (choose from {sorted(LAYOUTS)} or all)")
+        if args.ideal:
+            parser.error("--ideal is not run with --layouts")
     sizes = QUICK if args.quick else FULL
     for key, value in sizes.items():
         if getattr(args, key) is None:
@@ -170,6 +235,15 @@ def main(argv: Optional[list[str]] = None) -> int:
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     log(f"seeds: {seeds}; {args.scans} scans per drive, {args.beams} x {args.azimuth} LiDAR")
     warm_up()
+    if args.layouts:
+        results = run_layouts(args, lidar, seeds)
+        for name, drives in results.items():
+            print(f"\n{name}\n\n{table(drives)}")
+        print(f"\n{layouts_table(results)}")
+        write_report(args.out, json_text({"meta": {**meta, "layouts": args.layouts}, "layouts": {
+            name: {"drives": drives, "summary": summarize(drives)} for name, drives in results.items()}}))
+        print(f"\nwrote {args.out}")
+        return 0
     drives = []
     for k, seed in enumerate(seeds):
         sequence = skewed_sequence(args.scans, seed=seed, lidar=lidar, stamp_at=args.stamp_at,

@@ -150,6 +150,31 @@ def test_all_nan_cloud_is_rejected():
     assert err.value.kind == "no_finite"
 
 
+def test_no_returns_at_the_origin_are_dropped_with_their_times():
+    # Hesai's and Livox's drivers publish a beam that saw nothing as (0, 0, 0): not a point, like NaN.
+    pts = PTS.copy()
+    pts[[2, 8]] = 0.0  # no-returns
+    pts[5, 1] = np.nan
+    pts[10] = [0.0, 0.0, 3.0]  # on an axis: a measurement
+    pts[11] = [-0.0, 0.0, 0.0]  # negative zero is the origin too
+    rows = np.zeros(12, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("timestamp", "<f8")])
+    rows["x"], rows["y"], rows["z"] = pts.T
+    rows["timestamp"] = 5.0 + np.arange(12) * 1e-3  # absolute seconds (Hesai); the stamp is 5 s
+    msg = SimpleNamespace(height=1, width=12, is_bigendian=False, point_step=20, row_step=240, data=rows.tobytes(),
+                          fields=[field("x", 0, FLOAT32), field("y", 4, FLOAT32), field("z", 8, FLOAT32),
+                                  field("timestamp", 12, FLOAT64)],
+                          header=SimpleNamespace(stamp=SimpleNamespace(sec=5, nanosec=0)))
+    decoded = decode_scan(msg)
+    keep = np.array([i not in (2, 5, 8, 11) for i in range(12)])
+    np.testing.assert_array_equal(decoded.points, pts[keep].astype(np.float32))
+    np.testing.assert_allclose(decoded.times, np.flatnonzero(keep) * 1e-3, atol=1e-9)
+    assert (decoded.report.n_total, decoded.report.n_valid, decoded.report.n_nonfinite, decoded.report.n_origin) \
+        == (12, 8, 1, 3)
+    with pytest.raises(CloudError, match=r"no finite point off the origin \(1 non-finite, 3 at") as err:
+        decode_xyz(cloud(np.vstack([np.zeros((3, 3)), np.full((1, 3), np.nan)])))
+    assert err.value.kind == "no_finite"
+
+
 def test_encode_round_trip():
     enc = encode_xyz(PTS)
     assert enc.point_step == 12 and enc.row_step == 12 * len(PTS) and len(enc.data) == enc.row_step

@@ -95,7 +95,7 @@ def test_reads_rosbag2_directory_sqlite3(tmp_path):
     conn = writer.add_connection("/velodyne_points", "sensor_msgs/msg/PointCloud2", typestore=TYPESTORE)
     for i in range(2):
         msg = make_pointcloud2(types["sensor_msgs/msg/PointCloud2"], types["sensor_msgs/msg/PointField"],
-                               np.full((10, 3), float(i)), "velodyne", ns_to_stamp(STAMP0 + i),
+                               np.full((10, 3), float(i + 1)), "velodyne", ns_to_stamp(STAMP0 + i),
                                header_cls=types["std_msgs/msg/Header"])
         writer.write(conn, STAMP0 + i, TYPESTORE.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
     writer.close()
@@ -103,7 +103,7 @@ def test_reads_rosbag2_directory_sqlite3(tmp_path):
         assert reader.info.cloud_topic == "/velodyne_points" and reader.info.gt_topic is None
         frames = list(reader.clouds())
         stamps, poses, _ = reader.ground_truth()
-    assert len(frames) == 2 and frames[1].points[0, 0] == 1.0
+    assert len(frames) == 2 and frames[1].points[0, 0] == 2.0
     assert len(stamps) == 0 and poses.shape == (0, 4, 4)
 
 
@@ -170,7 +170,7 @@ def test_topic_errors(tmp_path):
 def test_undecodable_cloud_names_the_message(tmp_path):
     path = tmp_path / "nan.mcap"
     with BagWriter(path) as bag:
-        bag.write_cloud("/points", np.zeros((4, 3)), "s", STAMP0)
+        bag.write_cloud("/points", np.ones((4, 3)), "s", STAMP0)
         bag.write_cloud("/points", np.full((4, 3), np.nan), "s", STAMP0 + 1)
     with BagReader(path) as reader:
         with pytest.raises(BagError, match="message 1: .*no finite point"):
