@@ -78,5 +78,5 @@ def write_cloud_file(path: PathLike, header: str, data: np.ndarray) -> Path:
     """A text header and the points' bytes, written atomically (the array is not copied into one buffer)."""
     with atomic_file(path) as handle:
         handle.write(header.encode("ascii"))
-        handle.write(memoryview(data).cast("B"))
+        handle.write(data.data)  # the array's own buffer
     return Path(path)
