@@ -13,10 +13,13 @@ from typing import Any, Callable, Iterable, Mapping, Optional
 
 
 def param(default: Any, help: str, *, low: Optional[float] = None, high: Optional[float] = None,
-          choices: Optional[tuple] = None) -> Any:
+          choices: Optional[tuple] = None, dynamic: bool = False) -> Any:
     """A documented config field: ``low``/``high`` bound numbers, both inclusive (each number of a tuple),
-    ``choices`` strings. :func:`validate` enforces them on construction, :meth:`Parameter.check` on overrides."""
-    return field(default=default, metadata={"help": help, "low": low, "high": high, "choices": choices})
+    ``choices`` strings. :func:`validate` enforces them on construction, :meth:`Parameter.check` on overrides.
+    ``dynamic``: the node reads it when it is used, so it may change at runtime (``ros2 param set``); the others
+    are read once at start-up."""
+    return field(default=default, metadata={"help": help, "low": low, "high": high, "choices": choices,
+                                            "dynamic": dynamic})
 
 
 def section(factory: Callable[[], Any], help: str) -> Any:
@@ -34,6 +37,7 @@ class Parameter:
     low: Optional[float] = None
     high: Optional[float] = None
     choices: Optional[tuple] = None
+    dynamic: bool = False  # settable at runtime (ros2 param set); else read once at start-up
 
     @property
     def kind(self) -> type:
@@ -47,6 +51,8 @@ class Parameter:
         if self.low is not None or self.high is not None:
             limits.append(f"range [{'-inf' if self.low is None else self.low}, "
                           f"{'inf' if self.high is None else self.high}]")
+        if self.dynamic:
+            limits.append("settable at runtime")
         return self.help + (f" ({'; '.join(limits)})" if limits else "")
 
     def check(self, value: Any) -> Any:
@@ -117,7 +123,7 @@ def parameters(config: Any, exclude: Iterable[str] = (), prefix: str = "") -> di
             out.update(parameters(value, excluded, name + "."))
         else:
             out[name] = Parameter(name, value, f.metadata["help"], f.metadata.get("low"), f.metadata.get("high"),
-                                  f.metadata.get("choices"))
+                                  f.metadata.get("choices"), f.metadata.get("dynamic", False))
     return out
 
 

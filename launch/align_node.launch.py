@@ -11,6 +11,8 @@ already names one in FASTRTPS_DEFAULT_PROFILES_FILE; ``dds_profile:=none`` (or a
 launch file) unsets the variable: Fast DDS's defaults.
 
 RViz2 starts where it is installed (``rviz:=auto``); ``rviz:=true`` without it fails before any process starts.
+It gets a copy of the package's view whose topics and fixed frame are this launch's: the namespace it runs under,
+``input_topic`` and ``odom_frame`` (cemnet_ros/rviz_config.py).
 """
 import os
 
@@ -23,11 +25,13 @@ from launch.actions import (
     UnsetEnvironmentVariable,
 )
 from launch.conditions import IfCondition
+from launch.substitution import Substitution
 from launch.substitutions import LaunchConfiguration, NotEqualsSubstitution
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 from cemnet_ros.launch_choices import dds_profile_file, rviz_wanted
+from cemnet_ros.rviz_config import write_resolved_config
 from launch import LaunchDescription
 
 
@@ -83,7 +87,8 @@ def generate_launch_description():
     rviz = Node(
         package="rviz2",
         executable="rviz2",
-        arguments=["-d", os.path.join(share, "rviz", "cemnet_ros.rviz")],
+        arguments=["-d", ResolvedRvizConfig(os.path.join(share, "rviz", "cemnet_ros.rviz"),
+                                            LaunchConfiguration("input_topic"), LaunchConfiguration("odom_frame"))],
         parameters=[{"use_sim_time": use_sim_time}],  # the TF and the clouds carry the bag's stamps
         output="screen",
     )
@@ -114,3 +119,16 @@ def _installed(package):
     except PackageNotFoundError:
         return False
     return True
+
+
+class ResolvedRvizConfig(Substitution):
+    """The package's RViz view with the topics of the node this launch starts, as a temporary file: performed when
+    RViz2 starts, in the launch's namespace scope (cemnet_ros/rviz_config.py)."""
+
+    def __init__(self, template, input_topic, odom_frame):
+        super().__init__()
+        self._template, self._input_topic, self._odom_frame = template, input_topic, odom_frame
+
+    def perform(self, context):
+        return write_resolved_config(self._template, context.launch_configurations.get("ros_namespace"),
+                                     self._input_topic.perform(context), self._odom_frame.perform(context))

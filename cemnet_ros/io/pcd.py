@@ -1,4 +1,4 @@
-"""PCD point clouds (PCL's format): the x, y, z of ascii, binary and binary_compressed files."""
+"""PCD point clouds (PCL's format): read the x, y, z of ascii, binary and binary_compressed files; write binary."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -7,7 +7,15 @@ from typing import Dict, List
 
 import numpy as np
 
-from cemnet_ros.io.cloud_format import PointCloudFileError, read_header, to_int
+from cemnet_ros.io.atomic import PathLike
+from cemnet_ros.io.cloud_format import (
+    PointCloudFileError,
+    read_header,
+    to_int,
+    write_cloud_file,
+    xyz_float64,
+    xyz_little_endian,
+)
 from cemnet_ros.io.lzf import lzf_decompress
 
 _TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4",
@@ -108,7 +116,7 @@ def _binary(path: Path, body: bytes, h: _Header) -> np.ndarray:
     if len(body) < h.n * record.itemsize:
         raise PointCloudFileError(path, f"truncated PCD: {len(body)} data bytes, expected {h.n * record.itemsize}")
     table = np.frombuffer(body, dtype=record, count=h.n)
-    return np.stack([table[f"f{h.column(a)}"][:, 0].astype(np.float64) for a in "xyz"], axis=1)
+    return xyz_float64([table[f"f{h.column(a)}"][:, 0] for a in "xyz"])
 
 
 def _compressed(path: Path, body: bytes, h: _Header) -> np.ndarray:
@@ -130,4 +138,15 @@ def _compressed(path: Path, body: bytes, h: _Header) -> np.ndarray:
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
     columns = [np.frombuffer(raw, dtype=h.dtypes[k], count=h.n * h.counts[k], offset=int(starts[k]))
                .reshape(h.n, h.counts[k])[:, 0] for k in map(h.column, "xyz")]
-    return np.stack([c.astype(np.float64) for c in columns], axis=1)
+    return xyz_float64(columns)
+
+
+def write_pcd(path: PathLike, points: np.ndarray, dtype: type = np.float32) -> Path:
+    """Write ``(n, 3)`` points as a binary PCD v0.7 (x, y, z float32 or float64, unorganised, viewpoint at the
+    origin), as PCL's ``savePCDFileBinary`` does, atomically."""
+    data = xyz_little_endian(points, dtype, "write_pcd")
+    size = data.dtype.itemsize
+    header = ("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\n"
+              f"SIZE {size} {size} {size}\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {len(data)}\nHEIGHT 1\n"
+              f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(data)}\nDATA binary\n")
+    return write_cloud_file(path, header, data)

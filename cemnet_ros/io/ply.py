@@ -7,8 +7,15 @@ from typing import List, Optional
 
 import numpy as np
 
-from cemnet_ros.io.atomic import PathLike, atomic_write_bytes
-from cemnet_ros.io.cloud_format import PointCloudFileError, read_header, to_int
+from cemnet_ros.io.atomic import PathLike
+from cemnet_ros.io.cloud_format import (
+    PointCloudFileError,
+    read_header,
+    to_int,
+    write_cloud_file,
+    xyz_float64,
+    xyz_little_endian,
+)
 
 # PLY scalar type names (both spellings) -> numpy base type.
 PLY_TYPES = {
@@ -144,21 +151,15 @@ def _binary(path: Path, body: bytes, order: str, before: List[_Element], vertex:
         raise PointCloudFileError(path, f"truncated PLY: {len(body)} data bytes, the header promises {needed}")
     table = np.frombuffer(body, dtype=dtype, count=vertex.count, offset=offset)
     fields = {p.name: f"p{i}_{p.name}" for i, p in enumerate(vertex.props)}
-    return np.stack([table[fields[a]].astype(np.float64) for a in "xyz"], axis=1)
+    return xyz_float64([table[fields[a]] for a in "xyz"])
 
 
 def write_ply(path: PathLike, points: np.ndarray, dtype: type = np.float32) -> Path:
     """Write ``(n, 3)`` points as a binary little-endian PLY (float32 or float64 x, y, z), atomically."""
-    points = np.asarray(points)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"write_ply needs an (n, 3) array, got shape {points.shape}")
-    scalar = np.dtype(dtype)
-    names = {np.dtype(np.float32): "float", np.dtype(np.float64): "double"}
-    if scalar not in names:
-        raise ValueError(f"write_ply dtype must be float32 or float64, not {scalar}")
+    data = xyz_little_endian(points, dtype, "write_ply")
+    scalar = "float" if data.dtype.itemsize == 4 else "double"
     header = ("ply\nformat binary_little_endian 1.0\ncomment written by cemnet_ros\n"
-              f"element vertex {len(points)}\n"
-              + "".join(f"property {names[scalar]} {axis}\n" for axis in "xyz")
+              f"element vertex {len(data)}\n"
+              + "".join(f"property {scalar} {axis}\n" for axis in "xyz")
               + "end_header\n")
-    body = np.ascontiguousarray(points, dtype=scalar.newbyteorder("<")).tobytes()
-    return atomic_write_bytes(path, header.encode("ascii") + body)
+    return write_cloud_file(path, header, data)

@@ -1,20 +1,18 @@
-"""Trajectory metrics and I/O: TUM files, ATE after rigid alignment, per-pair relative pose errors.
+"""Trajectory metrics: ATE after rigid alignment, per-pair relative pose errors, stamp association.
 
 Poses are 4x4 numpy matrices ``T_world_sensor`` (sensor pose in the world frame). Stamps are integer
-nanoseconds. Everything here is pure numpy/scipy so it can score any odometry, not just CEMNet's.
+nanoseconds. Everything here is pure numpy/scipy so it can score any odometry, not just CEMNet's. The TUM and
+KITTI files are :mod:`cemnet_ros.io.trajectory_files`'.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from cemnet_ros.core.geometry import apply_transform, procrustes_np, rigid_transform, rotation_angle_deg
-from cemnet_ros.io.atomic import atomic_write_text
+from cemnet_ros.io.trajectory_files import as_poses
 
 
 @dataclass
@@ -45,17 +43,8 @@ class RPEResult:
         return out
 
 
-def _as_poses(poses: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
-    arr = np.asarray(poses, dtype=np.float64)
-    if arr.ndim != 3 or arr.shape[1:] != (4, 4):
-        raise ValueError(f"poses must have shape (n, 4, 4), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError("poses contain NaN or inf")
-    return arr
-
-
 def _check_pair(est: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    est, gt = _as_poses(est), _as_poses(gt)
+    est, gt = as_poses(est), as_poses(gt)
     if len(est) != len(gt):
         raise ValueError(f"estimate has {len(est)} poses but ground truth has {len(gt)}")
     return est, gt
@@ -107,49 +96,3 @@ def associate(query_ns: Sequence[int], reference_ns: Sequence[int], max_dt_ns: i
                 best = j
         out.append(int(order[best]) if best is not None and abs(int(ref_sorted[best]) - int(q)) <= max_dt_ns else None)
     return out
-
-
-def pose_to_tum_row(stamp_ns: int, pose: np.ndarray) -> str:
-    """One TUM line: ``timestamp tx ty tz qx qy qz qw`` (timestamp in seconds)."""
-    qx, qy, qz, qw = Rotation.from_matrix(pose[:3, :3]).as_quat()
-    tx, ty, tz = pose[:3, 3]
-    return f"{stamp_ns // 1_000_000_000}.{stamp_ns % 1_000_000_000:09d} " + " ".join(
-        f"{v:.9f}" for v in (tx, ty, tz, qx, qy, qz, qw)
-    )
-
-
-def write_tum(path: str | os.PathLike, stamps_ns: Sequence[int], poses: Sequence[np.ndarray]) -> Path:
-    """Write a TUM trajectory file atomically (temporary file in the same directory, then rename)."""
-    arr = _as_poses(poses) if len(poses) else np.zeros((0, 4, 4))
-    if len(stamps_ns) != len(arr):
-        raise ValueError(f"{len(stamps_ns)} stamps but {len(arr)} poses")
-    if any(int(s) < 0 for s in stamps_ns):
-        raise ValueError("TUM stamps must be >= 0")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = "# timestamp tx ty tz qx qy qz qw\n" + "".join(
-        pose_to_tum_row(int(s), p) + "\n" for s, p in zip(stamps_ns, arr)
-    )
-    atomic_write_text(path, text)
-    return path
-
-
-def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Read a TUM file -> (stamps_ns (n,) int64, poses (n,4,4)). Raises ValueError on malformed lines."""
-    stamps, poses = [], []
-    for lineno, line in enumerate(Path(path).read_text().splitlines(), 1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        parts = line.split()
-        if len(parts) != 8:
-            raise ValueError(f"{path}:{lineno}: expected 8 columns, got {len(parts)}")
-        try:
-            vals = [float(v) for v in parts[1:]]
-            sec, _, frac = parts[0].partition(".")
-            stamp = int(sec) * 1_000_000_000 + int((frac + "000000000")[:9] or 0)
-        except ValueError as err:
-            raise ValueError(f"{path}:{lineno}: {err}") from None
-        stamps.append(stamp)
-        poses.append(rigid_transform(Rotation.from_quat(vals[3:]).as_matrix(), vals[:3]))
-    return np.asarray(stamps, dtype=np.int64), np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)

@@ -63,12 +63,14 @@ class Alignment:
                                      name="cemnet_align")
         self._subscriptions: list = []
         self._subscribe(cfg)
-        self._services = NodeServices(node, session, cfg.odom_frame, self._warn)
+        self._services = NodeServices(node, session, cfg, self._warn)
         # On the steady clock: ROS time stands still with use_sim_time until /clock arrives, and so would they.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timers = [node.create_timer(1.0, self._publish_diagnostics, clock=steady)]
         if cfg.local_map_period > 0:
             self._timers.append(node.create_timer(cfg.local_map_period, self._publish_local_map))
+        if self._outputs.path is not None:
+            self._timers.append(node.create_timer(cfg.path_period, self._outputs.path.publish))
 
     def engine_ready(self, seconds: float) -> None:
         """The session's engine has loaded (in ``seconds``): scans queued meanwhile are processed now."""
@@ -99,6 +101,7 @@ class Alignment:
             self._input_topic = cfg.input_topic
             self._subscriptions.append(
                 self._node.create_subscription(PointCloud2, cfg.input_topic, self._on_scan, input_qos, raw=True))
+            self.status.input_topic = self._subscriptions[0].topic_name  # resolved: namespace, remaps
             return
         target_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=cfg.qos_depth,
                                 reliability=ReliabilityPolicy.RELIABLE,
@@ -109,6 +112,7 @@ class Alignment:
         self._subscriptions += [
             self._node.create_subscription(PointCloud2, cfg.source_topic, self._on_source, input_qos, raw=True),
             self._node.create_subscription(PointCloud2, cfg.target_topic, self._on_target, target_qos, raw=True)]
+        self.status.input_topic = self._subscriptions[0].topic_name
 
     # -- inputs (executor thread: CDR bytes + stamp, enqueue; no deserializing) ------------------------------
     def _incoming(self, payload: bytes, topic_kind: str) -> Optional[Incoming]:
@@ -154,6 +158,7 @@ class Alignment:
         except ScanRejected as exc:
             self._report(self._scan_status.rejected(exc.kind, str(exc), _stamp_of(item)))
             return
+        self.status.scan_frame(source.msg.header.frame_id)  # a registered scan's: not a foreign, refused one
         self._report(self._scan_status.step(result.step))
         self._outputs.step(result, source, frame)
         self._extrinsic.output_published()
@@ -215,7 +220,7 @@ class Alignment:
             self._node.get_logger().error(outcome.error)
         self._log_warnings(outcome.warnings)
         if outcome.verdict is not None:
-            self._outputs.scan_status(outcome.verdict)
+            self._outputs.scan_status(outcome.verdict, self.status.hardware_id())
 
     def _warn(self, kind: str, message: str) -> None:
         self._log_warnings(self._scan_status.throttled(kind, message))

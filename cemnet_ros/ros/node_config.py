@@ -19,7 +19,8 @@ COVARIANCE_MODES = ("registration", "fixed")
 
 @dataclass
 class NodeConfig:
-    """ROS wiring of ``align_node``; the pipeline's sections (:class:`AlignerConfig`) sit beside it."""
+    """ROS wiring of ``align_node``; the pipeline's sections (:class:`AlignerConfig`) sit beside it. The node reads
+    the ``dynamic`` ones (the save paths) again when it uses them: their values here are those at start-up."""
 
     mode: str = param("sequential", "'sequential' (scan-to-map odometry) or 'pair' (source to target topic)",
                       choices=MODES)
@@ -54,6 +55,19 @@ class NodeConfig:
     local_map_period: float = param(1.0, "seconds between ~/local_map publications; 0 = never", low=0.0)
     input_timeout: float = param(1.0, "diagnostics WARN when no scan came for this long (s), ERROR after 3x",
                                  low=0.01)
+    trajectory_max_poses: int = param(1_000_000, "published poses kept for ~/save_trajectory and ~/path (115 bytes "
+                                      "each; 1e6 = 28 h at 10 Hz); beyond it the oldest are dropped", low=1,
+                                      high=100_000_000)
+    save_directory: str = param("", "folder of the saved files whose path is relative; '' = $ROS_HOME/cemnet_ros "
+                                "(~/.ros/cemnet_ros); created when missing", dynamic=True)
+    save_map_path: str = param("cemnet_map_{time}.pcd", "~/save_map writes the local map (odom_frame) here: .pcd "
+                               "(binary) or .ply; {time} = the local date and time", dynamic=True)
+    save_trajectory_path: str = param("cemnet_trajectory_{time}.tum", "~/save_trajectory writes the published "
+                                      "poses here: .tum or .txt (TUM), .kitti (KITTI), and their flags beside it "
+                                      "(.flags.csv); {time} = the local date and time", dynamic=True)
+    path_period: float = param(0.0, "seconds between ~/path (nav_msgs/Path of the published poses) publications "
+                               "while someone subscribes; 0 = no ~/path", low=0.0)
+    path_max_poses: int = param(10_000, "~/path holds the newest this many poses", low=1, high=1_000_000)
 
 
 def node_parameters() -> dict[str, Parameter]:
@@ -78,7 +92,8 @@ HEADER = """align_node parameters (ROS 2 params file, keyed /** so that it appli
   ros2 launch cemnet_ros align_node.launch.py   (uses the installed copy of this file)
   ros2 run cemnet_ros align_node --ros-args \\
     --params-file $(ros2 pkg prefix cemnet_ros)/share/cemnet_ros/config/align_node.yaml
-Every parameter is read once at start-up. Generated from the schema: python -m cemnet_ros.ros.node_config"""
+Every parameter is read once at start-up, but the save_* ones ("settable at runtime": ros2 param set).
+Generated from the schema: python -m cemnet_ros.ros.node_config"""
 
 
 def params_file_text() -> str:

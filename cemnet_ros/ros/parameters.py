@@ -18,8 +18,9 @@ class ConfigError(ValueError):
 
 
 def descriptor(p: Any) -> ParameterDescriptor:
-    """Read-only, with the schema's help, range and choices (``ros2 param describe`` shows them)."""
-    out = ParameterDescriptor(description=p.describe(), read_only=True)
+    """Read-only unless the schema marks it dynamic (the save paths), with the schema's help, range and choices
+    (``ros2 param describe`` shows them)."""
+    out = ParameterDescriptor(description=p.describe(), read_only=not p.dynamic)
     if p.low is not None or p.high is not None:
         low, high = (-1e300 if p.low is None else p.low), (1e300 if p.high is None else p.high)
         if p.kind is int:

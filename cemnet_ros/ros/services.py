@@ -1,28 +1,32 @@
-"""The node's services and ``~/set_pose``: each converts its request and hands it to the AlignerSession."""
+"""The node's services and ``~/set_pose``: each converts its request and hands it to the AlignerSession (the
+saving to runtime/saving.py, with the save parameters' values at the call: ``ros2 param set`` changes them)."""
 from __future__ import annotations
 
-import time
-from pathlib import Path
 from typing import Callable
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
+from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.runtime.aligner_session import AlignerSession
 from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
+from cemnet_ros.runtime.saving import Saved, save_map, save_trajectory
 
 
 class NodeServices:
-    """``~/reset``, ``~/relocalize``, ``~/save_map`` and the ``~/set_pose`` subscription (executor thread)."""
+    """``~/reset``, ``~/relocalize``, ``~/save_map``, ``~/save_trajectory`` and the ``~/set_pose`` subscription
+    (executor thread)."""
 
-    def __init__(self, node: Node, session: AlignerSession, odom_frame: str,
+    def __init__(self, node: Node, session: AlignerSession, cfg: NodeConfig,
                  warn: Callable[[str, str], None]) -> None:
-        self._node, self._session, self._odom_frame, self._warn = node, session, odom_frame, warn
+        self._node, self._session, self._cfg, self._warn = node, session, cfg, warn
+        self._odom_frame = cfg.odom_frame
         self._set_pose = node.create_subscription(PoseWithCovarianceStamped, "~/set_pose", self._on_set_pose, 10)
         self._services = [node.create_service(Trigger, "~/reset", self._on_reset),
                           node.create_service(Trigger, "~/relocalize", self._on_relocalize),
-                          node.create_service(Trigger, "~/save_map", self._on_save_map)]
+                          node.create_service(Trigger, "~/save_map", self._on_save_map),
+                          node.create_service(Trigger, "~/save_trajectory", self._on_save_trajectory)]
 
     def destroy(self) -> None:
         """Destroy the services and the subscription (a lifecycle node's deactivate)."""
@@ -60,15 +64,24 @@ class NodeServices:
                                      f"in {self._odom_frame} (a deliberate jump)")
 
     def _on_save_map(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        points = self._session.map_in_odom()
-        if points is None:
-            response.success, response.message = False, "no map yet"
-            return response
-        from cemnet_ros.io.pointcloud_files import write_ply
+        saved = save_map(self._session.map_in_odom(), self._parameter("save_map_path"),
+                         self._parameter("save_directory"), self._odom_frame)
+        return self._answer(saved, response)
 
-        path = Path(f"cemnet_map_{time.strftime('%Y%m%d_%H%M%S')}.ply").resolve()
-        write_ply(path, points)
-        response.success = True
-        response.message = f"wrote {len(points)} map points ({self._odom_frame}) to {path}"
-        self._node.get_logger().info(response.message)
+    def _on_save_trajectory(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        frame = self._odom_frame if self._cfg.mode == "sequential" else "the target's frame"
+        saved = save_trajectory(self._session.trajectory.snapshot(), self._parameter("save_trajectory_path"),
+                                self._parameter("save_directory"), frame, self._cfg.base_frame)
+        return self._answer(saved, response)
+
+    def _parameter(self, name: str) -> str:
+        """A save parameter's value now (they are settable at runtime)."""
+        return str(self._node.get_parameter(name).value)
+
+    def _answer(self, saved: Saved, response: Trigger.Response) -> Trigger.Response:
+        if saved.success:  # one call site per severity: rclpy's logger refuses a site that changes it
+            self._node.get_logger().info(saved.message)
+        else:
+            self._node.get_logger().warn(saved.message)
+        response.success, response.message = saved.success, saved.message
         return response

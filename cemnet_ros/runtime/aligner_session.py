@@ -4,7 +4,8 @@ The aligner loads in a background thread (:meth:`AlignerSession.load`: torch, th
 seconds) while scans queue; the worker waits for it (:meth:`~AlignerSession.begin_scan`). Requests from the
 services (reset, relocalize, a pose set before the aligner exists) are carried out before the next scan; a pose
 set later, and readers of the map (timers, services), take the map lock, so that they act between two scans.
-Each step becomes the numbers the node publishes (:func:`~.odometry_output.odometry_output`).
+Each step becomes the numbers the node publishes (:func:`~.odometry_output.odometry_output`), and its pose joins
+the session's trajectory (:class:`~.trajectory_log.TrajectoryLog`, for ``~/save_trajectory`` and ``~/path``).
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.runtime.extrinsic import BaseFrame
 from cemnet_ros.runtime.odometry_output import OdometryOutput, odometry_output
+from cemnet_ros.runtime.trajectory_log import TrajectoryLog
 
 
 @dataclass
@@ -39,8 +41,8 @@ def _scan_aligner(config: AlignerConfig) -> Any:
 class AlignerSession:
     """A ScanAligner as the node drives it from several threads.
 
-    ``output_config``: the node's covariance and effort settings (a NodeConfig); ``make_aligner``: builds the
-    aligner from ``config`` (default: a ScanAligner).
+    ``output_config``: the node's covariance, effort and trajectory settings (a NodeConfig); ``make_aligner``:
+    builds the aligner from ``config`` (default: a ScanAligner). :attr:`trajectory` keeps every published pose.
     """
 
     def __init__(self, config: AlignerConfig, output_config: Any, base: BaseFrame,
@@ -54,6 +56,7 @@ class AlignerSession:
         self._requests: dict[str, Any] = {}
         self._requests_lock = threading.Lock()
         self._last_stamp_ns: Optional[int] = None
+        self.trajectory = TrajectoryLog(output_config.trajectory_max_poses)
 
     def load(self) -> Optional[float]:
         """Build the aligner; the seconds it took, or None when it failed (:attr:`fatal_error` says why)."""
@@ -126,6 +129,7 @@ class AlignerSession:
         dt_s = None if self._last_stamp_ns is None else (step.stamp_ns - self._last_stamp_ns) * 1e-9
         self._last_stamp_ns = step.stamp_ns
         out = odometry_output(step, self.base, dt_s, self._output_config, self.config.health.covariance_inflation)
+        self.trajectory.append(step.stamp_ns, out.T_odom_base, step)
         return StepResult(step, out, out.T_odom_base @ self.base.T_base_sensor)
 
     # -- readers (timer and service threads) ----------------------------------------------------------------

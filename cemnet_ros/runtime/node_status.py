@@ -6,7 +6,9 @@ but not one message has ever arrived, the message says so (the transport drops t
 profile fixes that, docs/node.md). New rejected inputs, drops, errors or flagged steps since the last report are
 a WARN, and so are scans arriving for ``CLOCK_GRACE_S`` while the node's ROS time stays unset (use_sim_time
 without /clock: every scan's stamp is then ahead of a clock that reads 0) and a standing warning (a condition that
-lasts until the node restarts, e.g. an extrinsic ignored: ``warning_<kind>`` in the values).
+lasts until the node restarts, e.g. an extrinsic ignored: ``warning_<kind>`` in the values). The reports name the
+sensor in ``hardware_id``: the frame of its scans on the input topic (:meth:`NodeStatus.hardware_id`), so that two
+odometry nodes on two sensors read apart in an aggregator or ``rqt_robot_monitor``.
 """
 from __future__ import annotations
 
@@ -44,13 +46,16 @@ class Report:
     level: int
     message: str
     values: dict[str, Any] = field(default_factory=dict)
+    hardware_id: str = ""
 
 
 class NodeStatus:
     """Thread-safe counters of one node; :meth:`report` is called by the diagnostics timer."""
 
-    def __init__(self, input_timeout: float, clock=time.monotonic) -> None:
+    def __init__(self, input_timeout: float, clock=time.monotonic, input_topic: str = "") -> None:
         self.input_timeout = float(input_timeout)
+        self.input_topic = input_topic  # resolved: the scans' (sequential) or the sources' (pair mode)
+        self._scan_frame = ""  # the frame_id of the last decoded input scan
         self._clock = clock
         self._lock = threading.Lock()
         self._started = clock()
@@ -78,6 +83,18 @@ class NodeStatus:
         """The worker took a message out of the queue and decoded it."""
         with self._lock:
             self._decoded.add(self._clock())
+
+    def scan_frame(self, frame_id: str) -> None:
+        """The frame_id of an input scan (a source in pair mode), for :meth:`hardware_id`."""
+        with self._lock:
+            self._scan_frame = frame_id
+
+    def hardware_id(self) -> str:
+        """The sensor as the diagnostics name it: ``<frame_id of its scans> on <input topic>``, e.g. ``velodyne on
+        /robot1/points``; the topic alone until a scan has been decoded (or when its frame_id is empty)."""
+        with self._lock:
+            frame = self._scan_frame
+        return f"{frame} on {self.input_topic}" if frame else self.input_topic
 
     def warn(self, kind: str) -> int:
         """Count a scan admitted with a warning of ``kind``; its count so far."""
@@ -156,7 +173,7 @@ class NodeStatus:
         values.update({f"rejected_{kind}": count for kind, count in sorted(rejected.items())})
         values.update({f"warned_{kind}": count for kind, count in sorted(warned.items())})
         values.update({f"warning_{kind}": text for kind, text in sorted(standing.items())})
-        return Report(level, message, values)
+        return Report(level, message, values, self.hardware_id())
 
     def _level(self, counts: tuple, previous: tuple, age: float, silent_publishers: int) -> tuple[int, str]:
         """``silent_publishers``: matched on the input topic, not one message received from any of them."""

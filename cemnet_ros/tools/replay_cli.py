@@ -28,12 +28,12 @@ import yaml
 
 from cemnet_ros.io.atomic import write_report
 from cemnet_ros.io.report import Report
+from cemnet_ros.io.trajectory_files import write_tum
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.replay.bag_io import BagError, BagReader
 from cemnet_ros.replay.realtime import live_summary
 from cemnet_ros.replay.report import evaluate, format_report, skipped_line, speed
 from cemnet_ros.replay.runner import ODOM_TOPIC, ReplayResult, copied_topics, output_topics, run_replay
-from cemnet_ros.replay.trajectory import write_tum
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.schema import add_arguments, build, flatten_mapping, parameters, parsed_overrides
 from cemnet_ros.tools.cli_errors import reported_errors

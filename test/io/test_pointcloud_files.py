@@ -6,7 +6,14 @@ import pytest
 from shared_data import KITTI, requires_shared
 
 from cemnet_ros.io.atomic import atomic_write_text
-from cemnet_ros.io.pointcloud_files import PointCloudFileError, lzf_decompress, read_points, write_ply
+from cemnet_ros.io.pointcloud_files import (
+    PointCloudFileError,
+    lzf_decompress,
+    read_points,
+    write_pcd,
+    write_ply,
+    write_points,
+)
 
 RNG = np.random.default_rng(7)
 POINTS = RNG.normal(size=(50, 3))
@@ -27,6 +34,49 @@ def test_write_ply_roundtrip_float32_and_float64(tmp_path):
 def test_write_ply_rejects_bad_shape(tmp_path):
     with pytest.raises(ValueError, match=r"\(n, 3\)"):
         write_ply(tmp_path / "bad.ply", np.zeros((4, 2)))
+
+
+def test_write_pcd_is_a_pcl_binary_file_that_reads_back(tmp_path):
+    write_pcd(tmp_path / "a.pcd", POINTS)
+    data = (tmp_path / "a.pcd").read_bytes()
+    header, body = data.split(b"DATA binary\n")
+    assert header.decode().splitlines()[1:] == [  # PCL's order of the header lines (v0.7)
+        "VERSION 0.7", "FIELDS x y z", "SIZE 4 4 4", "TYPE F F F", "COUNT 1 1 1", "WIDTH 50", "HEIGHT 1",
+        "VIEWPOINT 0 0 0 1 0 0 0", "POINTS 50"]
+    assert body == POINTS.astype("<f4").tobytes()
+    np.testing.assert_array_equal(read_points(tmp_path / "a.pcd"), POINTS.astype(np.float32))
+    write_pcd(tmp_path / "b.pcd", POINTS, dtype=np.float64)
+    np.testing.assert_array_equal(read_points(tmp_path / "b.pcd"), POINTS)
+    with pytest.raises(ValueError, match="float32 or float64"):
+        write_pcd(tmp_path / "c.pcd", POINTS, dtype=np.int32)
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_write_points_picks_the_format_by_suffix(tmp_path):
+    for name in ("map.pcd", "map.PLY"):
+        write_points(tmp_path / name, POINTS)
+        np.testing.assert_array_equal(read_points(tmp_path / name), POINTS.astype(np.float32))
+    assert (tmp_path / "map.pcd").read_bytes().startswith(b"# .PCD v0.7")
+    assert (tmp_path / "map.PLY").read_bytes().startswith(b"ply\n")
+    with pytest.raises(ValueError, match="unknown point cloud suffix '.xyz'.*use .pcd or .ply"):
+        write_points(tmp_path / "map.xyz", POINTS)
+    assert not (tmp_path / "map.xyz").exists()
+
+
+def test_written_pcd_loads_in_pypcd4(tmp_path):
+    """An independent reader (pypcd4, not a dependency: skipped without it) reads the same points."""
+    pypcd4 = pytest.importorskip("pypcd4")
+    write_points(tmp_path / "map.pcd", POINTS)
+    points = pypcd4.PointCloud.from_path(tmp_path / "map.pcd").numpy(("x", "y", "z"))
+    np.testing.assert_array_equal(points, POINTS.astype(np.float32))
+
+
+def test_written_ply_loads_in_plyfile(tmp_path):
+    """An independent reader (plyfile, not a dependency: skipped without it) reads the same points."""
+    plyfile = pytest.importorskip("plyfile")
+    write_points(tmp_path / "map.ply", POINTS)
+    vertex = plyfile.PlyData.read(str(tmp_path / "map.ply"))["vertex"]
+    np.testing.assert_array_equal(np.stack([vertex[a] for a in "xyz"], axis=1), POINTS.astype(np.float32))
 
 
 def test_ply_ascii_with_extra_properties_and_face_element(tmp_path):

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cemnet_ros.io.trajectory_files import read_tum
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
-from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
+from cemnet_ros.replay.trajectory import absolute_trajectory_error
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.tools.replay_cli import main
 

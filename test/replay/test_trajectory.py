@@ -1,4 +1,4 @@
-"""Trajectory metrics: ATE after rigid alignment, per-pair RPE, TUM round trip, stamp association."""
+"""Trajectory metrics: ATE after rigid alignment, per-pair RPE, stamp association (TUM files: test/io)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,9 +8,7 @@ from scipy.spatial.transform import Rotation
 from cemnet_ros.replay.trajectory import (
     absolute_trajectory_error,
     associate,
-    read_tum,
     relative_pose_errors,
-    write_tum,
 )
 
 
@@ -91,26 +89,6 @@ def test_mismatched_or_bad_inputs_raise():
         absolute_trajectory_error(bad, gt)
     with pytest.raises(ValueError, match="shape"):
         absolute_trajectory_error(np.zeros((3, 3, 3)), np.zeros((3, 3, 3)))
-
-
-def test_tum_round_trip(tmp_path):
-    gt = _wiggly_path(12)
-    stamps = [1_700_000_000_000_000_000 + i * 33_333_333 for i in range(12)]
-    path = write_tum(tmp_path / "sub" / "traj.txt", stamps, gt)
-    lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
-    assert len(lines) == 12 and len(lines[0].split()) == 8
-    assert lines[1].split()[0] == "1700000000.033333333"
-    stamps_back, poses_back = read_tum(path)
-    assert stamps_back.tolist() == stamps
-    np.testing.assert_allclose(poses_back, gt, atol=1e-8)
-    assert not list(path.parent.glob("*.tmp"))  # atomic write leaves no temporary behind
-
-
-def test_read_tum_rejects_malformed(tmp_path):
-    path = tmp_path / "bad.txt"
-    path.write_text("0.0 1 2 3 0 0 0\n")
-    with pytest.raises(ValueError, match="8 columns"):
-        read_tum(path)
 
 
 def test_associate_nearest_within_tolerance():

@@ -144,13 +144,12 @@ def test_reset_restarts_the_map_and_keeps_odom_continuous(harness_factory):
     assert trans_err < 0.02
 
 
-def test_set_pose_local_map_and_save_map(harness_factory, tmp_path, monkeypatch):
+def test_set_pose_local_map_and_save_map(harness_factory, tmp_path):
     from geometry_msgs.msg import PoseWithCovarianceStamped
 
     from cemnet_ros.io.pointcloud_files import read_points
 
-    monkeypatch.chdir(tmp_path)  # ~/save_map writes into the working directory
-    h = harness_factory({"local_map_period": 0.2})
+    h = harness_factory({"local_map_period": 0.2, "save_directory": str(tmp_path)})  # more: test_node_saving.py
     maps = []
     h.probe.create_subscription(PointCloud2, f"/{h.namespace}/align_node/local_map", maps.append,
                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -162,7 +161,7 @@ def test_set_pose_local_map_and_save_map(harness_factory, tmp_path, monkeypatch)
     assert save.wait_for_service(timeout_sec=5)
     future = save.call_async(Trigger.Request())
     assert wait_for(future.done, 10) and future.result().success, future.result()
-    saved = sorted(tmp_path.glob("cemnet_map_*.ply"))
+    saved = sorted(tmp_path.glob("cemnet_map_*.pcd"))
     assert len(saved) == 1 and len(read_points(saved[0])) > 1000
     # set_pose: the next scan starts a new map with the base at the given pose.
     target = make_transform(yaw=0.3, t=(10.0, -4.0, 0.0))

@@ -153,7 +153,7 @@ def test_rviz_config_parses_and_shows_the_node_outputs():
     for display in manager["Displays"]:
         topics.setdefault(display["Class"].split("/")[1], set()).add(display.get("Topic", {}).get("Value"))
     assert "TF" in topics
-    assert topics["Odometry"] == {"/align_node/odometry"}
+    assert topics["Odometry"] == {"/align_node/odometry"} and topics["Path"] == {"/align_node/path"}
     assert topics["PointCloud2"] == {"/points", "/align_node/aligned_cloud", "/align_node/local_map"}
     (odometry,) = [display for display in manager["Displays"] if display["Class"].endswith("/Odometry")]
     assert odometry["Covariance"]["Value"] is True

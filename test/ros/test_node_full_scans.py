@@ -15,6 +15,7 @@ import random
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ pytestmark = [pytest.mark.dds, pytest.mark.slow]
 
 N_SCANS = 50
 NS = "/full"
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_full_size_scans_at_10_hz_all_arrive_and_each_is_processed_or_counted():
@@ -32,7 +34,10 @@ def test_full_size_scans_at_10_hz_all_arrive_and_each_is_processed_or_counted():
            "ROS_DOMAIN_ID": str(random.randint(120, 200))}  # the shipped profile and a domain of its own
     node = start_node(NS, {"qos_reliability": "best_effort"}, env=env)
     try:
-        run = subprocess.run([sys.executable, __file__], env=env, capture_output=True, text=True, timeout=420)
+        publisher_env = {**env, "PYTHONPATH": os.pathsep.join(  # the script imports benchmarks/ (not installed)
+            filter(None, [str(REPO), env.get("PYTHONPATH", "")]))}
+        run = subprocess.run([sys.executable, __file__], env=publisher_env, capture_output=True, text=True,
+                             timeout=420)
     finally:
         node.terminate()
         node.wait(20)

@@ -29,6 +29,7 @@ from sensor_msgs.msg import PointCloud2  # noqa: E402
 from benchmarks.metrics import relative_error  # noqa: E402
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
 from cemnet_ros.ros.node_config import node_parameters  # noqa: E402
+from cemnet_ros.rviz_config import topics  # noqa: E402
 
 pytestmark = [pytest.mark.dds, pytest.mark.skipif(bool(ros2_cli_missing()), reason=ros2_cli_missing() or "-")]
 LAUNCH = ["ros2", "launch", "cemnet_ros", "align_node.launch.py"]
@@ -56,11 +57,17 @@ def test_a_missing_dds_profile_fails_clearly_before_starting_the_node(install_pr
     assert run.returncode != 0 and "no such file" in output and "process started" not in output, output
 
 
-def test_rviz_auto_starts_rviz2_where_it_is_installed(install_prefix, tmp_path):
+def _stand_in_rviz(tmp_path) -> Path:
+    """An install prefix with an rviz2 that says it started and copies the view it was given to tmp_path."""
     stand_in = tmp_path / "rviz_install"
-    add_stand_in_executable(stand_in, "rviz2", "rviz2", 'echo "stand-in rviz2 $*"; exec sleep 120')
+    add_stand_in_executable(stand_in, "rviz2", "rviz2",
+                            f'echo "stand-in rviz2 $*"; cp "$2" {tmp_path}/seen.rviz; exec sleep 120')
+    return stand_in
+
+
+def test_rviz_auto_starts_rviz2_where_it_is_installed(install_prefix, tmp_path):
     env = ros_environment(install_prefix, domain_id())
-    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(stand_in), env["AMENT_PREFIX_PATH"]])
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(_stand_in_rviz(tmp_path)), env["AMENT_PREFIX_PATH"]])
     launch, output = start(LAUNCH, env)
     try:
         assert output.wait_for("stand-in rviz2 -d", 60.0), output.text()
@@ -68,7 +75,52 @@ def test_rviz_auto_starts_rviz2_where_it_is_installed(install_prefix, tmp_path):
         interrupt(launch)
     finally:
         kill_group(launch)
-    assert "share/cemnet_ros/rviz/cemnet_ros.rviz" in output.text(timeout=10.0), output.text()
+    seen = (tmp_path / "seen.rviz").read_text()  # the package's view, resolved for a launch at the root
+    assert topics(seen) == topics((REPO / "rviz" / "cemnet_ros.rviz").read_text()), seen
+
+
+def test_rviz_follows_the_namespace_and_the_input_topic_of_an_including_launch(install_prefix, tmp_path):
+    """A robot's launch file includes this one under PushRosNamespace with its own input and frame: RViz2's view
+    names exactly the topics the running node has (read from the ROS graph)."""
+    parent = tmp_path / "robot.launch.py"
+    parent.write_text(f"""
+from launch import LaunchDescription
+from launch.actions import GroupAction, IncludeLaunchDescription
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch_ros.actions import PushRosNamespace
+
+
+def generate_launch_description():
+    include = IncludeLaunchDescription(
+        PythonLaunchDescriptionSource("{install_prefix}/share/cemnet_ros/launch/align_node.launch.py"),
+        launch_arguments={{"input_topic": "lidar/points", "odom_frame": "robot1/odom", "rviz": "true"}}.items())
+    return LaunchDescription([GroupAction([PushRosNamespace("robot1"), include])])
+""")
+    domain = domain_id()
+    env = ros_environment(install_prefix, domain)
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(_stand_in_rviz(tmp_path)), env["AMENT_PREFIX_PATH"]])
+    launch, output = start(["ros2", "launch", str(parent)], env)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    probe = rclpy.create_node("graph_probe", context=context)
+    try:
+        assert output.wait_for("stand-in rviz2 -d", 60.0), output.text()
+        view = topics((tmp_path / "seen.rviz").read_text())
+        node = "/robot1/align_node"
+        assert view == {"Odometry": f"{node}/odometry", "Path": f"{node}/path", "Local map": f"{node}/local_map",
+                        "Aligned cloud": f"{node}/aligned_cloud", "Input cloud": "/robot1/lidar/points"}
+        wanted = set(view.values()) - {f"{node}/path", f"{node}/aligned_cloud"}  # off by default
+
+        def graph() -> set:
+            return set(dict(probe.get_topic_names_and_types()))
+
+        assert wait_for(lambda: wanted <= graph(), 60.0), (wanted - graph(), output.text())
+        assert "robot1/odom" in (tmp_path / "seen.rviz").read_text()
+        interrupt(launch)
+    finally:
+        probe.destroy_node()
+        rclpy.shutdown(context=context)
+        kill_group(launch)
 
 
 @pytest.mark.parametrize("argument, expected", [

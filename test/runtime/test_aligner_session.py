@@ -23,6 +23,7 @@ class FakeAligner:
 
     def __init__(self, config):
         self.pose, self.calls, self.scale = np.eye(4), [], 0.25
+        self.flag_stamps: set = set()  # steps at these stamps are flagged (and "recovered")
         self.local_map = SimpleNamespace(points=np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]]), empty=lambda: False)
 
     def reset(self, T_odom_sensor):
@@ -36,8 +37,9 @@ class FakeAligner:
         self.calls.append(("process", stamp_ns, frame_id, now_ns, effort))
         relative = np.linalg.inv(self.pose) @ (self.pose @ MOTION)
         self.pose = self.pose @ MOTION
-        return SimpleNamespace(stamp_ns=stamp_ns, pose=self.pose.copy(), relative=relative, accepted=True,
-                               covariance=np.eye(6) * 1e-4)
+        flagged = stamp_ns in self.flag_stamps
+        return SimpleNamespace(stamp_ns=stamp_ns, pose=self.pose.copy(), relative=relative, accepted=not flagged,
+                               covariance=np.eye(6) * 1e-4, fitness=0.9, degenerate=False, recovered=flagged)
 
 
 def _session(make=FakeAligner):
@@ -124,3 +126,14 @@ def test_the_map_is_read_in_odom_and_aligned_points_are_thinned_on_request():
     thinned = aligned_points(points, T_BASE_SENSOR, 0.5)  # one point per 0.5 m voxel, in odom
     assert len(thinned) == len(np.unique(np.floor(in_odom / 0.5), axis=0)) > 1
     assert np.all((thinned.min(axis=0) >= in_odom.min(axis=0)) & (thinned.max(axis=0) <= in_odom.max(axis=0)))
+
+
+def test_every_published_pose_joins_the_trajectory_flagged_ones_too():
+    session = _session()
+    session.load()
+    session._aligner.flag_stamps = {1_200_000_000}
+    results = [session.process(_scan(1_000_000_000 + k * 100_000_000), "lidar", None) for k in range(4)]
+    kept = session.trajectory.snapshot()
+    assert kept.stamps_ns.tolist() == [1_000_000_000 + k * 100_000_000 for k in range(4)]
+    np.testing.assert_array_equal(kept.poses, [r.out.T_odom_base for r in results])  # the base's, as published
+    assert kept.accepted.tolist() == [True, True, False, True] and kept.recovered.tolist()[2]

@@ -89,3 +89,13 @@ def test_scans_without_a_clock_under_sim_time_warn_after_a_grace_period():
     assert report.level == WARN and report.values["ros_time_unset"] is True
     assert "use_sim_time is true but no /clock has arrived" in report.message and "--clock" in report.message
     assert status.report(stats(), None, clock_unset=False).level == OK
+
+
+def test_the_hardware_id_names_the_scans_frame_on_the_input_topic():
+    status = NodeStatus(input_timeout=1.0, clock=Clock(), input_topic="/robot1/points")
+    assert status.report(stats(), None).hardware_id == "/robot1/points"  # no scan yet
+    status.scan_frame("velodyne")
+    assert status.hardware_id() == "velodyne on /robot1/points"
+    assert status.report(stats(), None).hardware_id == "velodyne on /robot1/points"
+    status.scan_frame("")
+    assert status.hardware_id() == "/robot1/points"

@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cemnet_ros.io.trajectory_files import read_tum
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.replay.bag_io import BagReader, BagWriter
-from cemnet_ros.replay.trajectory import absolute_trajectory_error, read_tum
+from cemnet_ros.replay.trajectory import absolute_trajectory_error
 from cemnet_ros.schema import build
 from cemnet_ros.tools.replay_cli import load_params, main
 
