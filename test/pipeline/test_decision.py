@@ -22,17 +22,17 @@ def at(x: float, yaw_deg: float = 0.0) -> np.ndarray:
 
 
 def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, conditioning: float = 0.1,
-           explained: bool = False, pairs: int = 500, yaw_deg: float = 0.0) -> Answer:
+           explained: bool = False, pairs: int = 500, yaw_deg: float = 0.0, origin: Origin = Origin.SEARCH) -> Answer:
     values = np.array([conditioning, 0.5, 0.6, 0.7, 0.8, 1.0])
-    return Answer(at(x, yaw_deg), Origin.PREDICTION, Signals(fitness, 0.0, 0.0, conditioning, 0.0, coverage),
+    return Answer(at(x, yaw_deg), origin, Signals(fitness, 0.0, 0.0, conditioning, 0.0, coverage),
                   Conditioning(values, np.eye(6), 10.0), 1e-4, pairs, explained)
 
 
 def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", after_gap=False,
              missing="") -> Evidence:
     expectation = Expectation(at(0.0), NEAR, level, because, after_gap)
-    return Evidence.of(list(answers), expectation, RULES, searched=searched, neighbours_checked=neighbours,
-                       missing=missing)
+    return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}), searched=searched,
+                       neighbours_checked=neighbours, missing=missing)
 
 
 def test_no_answer_or_no_overlap_fails():
@@ -63,6 +63,8 @@ def test_an_unconfirmed_answer_stands_after_the_search_only_next_to_a_prediction
     assert decide(evidence(answer(fitness=low), searched=True, after_gap=True), RULES).outcome == Outcome.FAILED
     away = decide(evidence(answer(x=3.0, fitness=low), searched=True), RULES)
     assert away.outcome == Outcome.FAILED and "away from the motion prediction" in away.reason
+    reached = decide(evidence(answer(x=3.0, fitness=low, origin=Origin.PREDICTION), searched=True), RULES)
+    assert reached.outcome == Outcome.ACCEPTED  # the prediction's own polish from afar reached it
 
 
 def test_a_reason_given_makes_the_search_compete_first():
@@ -120,6 +122,6 @@ def test_the_offset_from_the_prediction_ignores_the_directions_the_view_leaves_f
     corridor = answer(x=3.0, conditioning=1e-6)  # eigenvector 0 (rotation about x) is free: x stays constrained
     assert evidence(corridor).offset[0] == pytest.approx(3.0)
     values = np.array([1e-6, 0.5, 0.6, 0.7, 0.8, 1.0])
-    free_x = Answer(at(3.0), Origin.PREDICTION, Signals(LEVEL, 0, 0, 1e-6, 0, 1.0),
+    free_x = Answer(at(3.0), Origin.SEARCH, Signals(LEVEL, 0, 0, 1e-6, 0, 1.0),
                     Conditioning(values, np.roll(np.eye(6), 3, axis=1), 10.0), 1e-4, 500, False)
     assert evidence(free_x).offset[0] == pytest.approx(0.0, abs=1e-9) and evidence(free_x).near

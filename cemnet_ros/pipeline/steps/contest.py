@@ -1,7 +1,8 @@
 """One scan's competing answers against one map: each start polished once and measured (:mod:`.answer`).
 
 A start is polished finely, or *wide* (:mod:`.polish`: GICP against the map's last scan, then fine): a wide
-polish whose basin stage lands on an answer already there is not polished again. The contest also keeps the
+polish whose basin stage lands on an answer already there is not polished again; the kinds of start that reached
+an answer are its *support* (the prediction among them: the prediction's basin holds it). The contest also keeps the
 prediction the answers are judged near (recentred when the prediction left the map and the global search ran
 around where the map last grew instead), why a start found no map to register against, and which kinds of
 independent start have competed (:class:`~.evidence.Evidence`).
@@ -25,6 +26,7 @@ class Contest:
         self.polisher, self.T_predicted = polisher, T_predicted
         self.answers: list[Answer] = []
         self._entered: list[tuple[np.ndarray, bool]] = []  # (start, wide) already polished
+        self._arrivals: list[tuple[Origin, np.ndarray]] = []  # every start's landing place, polished or not
         self.polishes = 0  # fine polishes run (the contest's cost, reported per scan)
         self.searched = False  # the global search's hypotheses have competed
         self.neighbours_checked = False  # the leader's rotational neighbours have competed
@@ -41,12 +43,18 @@ class Contest:
         if wide:
             T_polish_start = self.polisher.basin(T_start)
             if any(not distinct(T_polish_start, a.T_odom_sensor) for a in self.answers):
+                self._arrivals.append((origin, T_polish_start))
                 return None
         polish = self.polisher.fine(T_polish_start)
         self.polishes += 1
         answer = measured(self.polisher, T_start, polish, origin, self.T_predicted, spread_m)
         self.answers.append(answer)
+        self._arrivals.append((origin, answer.T_odom_sensor))
         return answer
+
+    def support(self, answer: Answer) -> frozenset[Origin]:
+        """The kinds of start that reached ``answer``."""
+        return frozenset(origin for origin, T in self._arrivals if not distinct(T, answer.T_odom_sensor))
 
     def recentre(self, T_guess: np.ndarray) -> None:
         """Judge the answers around ``T_guess`` instead of the prediction (which left the map; only before any
@@ -58,5 +66,5 @@ class Contest:
                  search_because: str = "", after_gap: bool = False) -> Evidence:
         """The record the decision reads (:class:`~.evidence.Evidence`)."""
         expectation = Expectation(self.T_predicted, near, level, search_because, after_gap)
-        return Evidence.of(self.answers, expectation, rules, searched=self.searched,
+        return Evidence.of(self.answers, expectation, rules, support=self.support, searched=self.searched,
                            neighbours_checked=self.neighbours_checked, missing=self.missing)

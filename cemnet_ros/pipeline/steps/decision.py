@@ -12,11 +12,11 @@ The rules, in the order :func:`decide` applies them (the first that applies deci
 4. **Degenerate**: the view leaves a direction unconstrained (conditioning below ``min_conditioning``): flagged,
    the prediction kept along that direction.
 5. **Confirmed where expected**: the leader fits at ``confirm_ratio`` x the running level and the prediction
-   explains it or it lies within the prediction's spread: it stands without further starts. Anything else waits
-   for the global search: an answer the prediction does not vouch for needs the independent starts to have found
-   nothing as consistent; after them it stands when it is confirmed, or when it lies within the prediction's
-   spread and still overlaps (rule 1) and the prediction was no extrapolation over a stamp gap. A first pair has
-   no level: it stands when the search found no near-tie.
+   expects it (:attr:`~.evidence.Evidence.expected`: the prediction's polish reached it or it lies within the
+   prediction's spread): it stands without further starts. Anything else waits for the global search, whose
+   starts are independent of the prediction; after it an answer stands when it is confirmed, or when the
+   prediction expects it, it still overlaps (rule 1) and the prediction was no extrapolation over a stamp gap. A
+   first pair has no level: it stands when the search found no near-tie.
 6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
    flat valley) waits for its rotational neighbours to compete (a near-tie then flags it, rule 3).
 7. Otherwise: *accepted*.
@@ -92,13 +92,13 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
                                            "prediction kept along the unconstrained direction")
     confirmed = level is not None and leader.fitness >= rules.confirm_ratio * level
-    if not (confirmed and (leader.explained or evidence.near)):
+    if not (confirmed and evidence.expected):
         why = (f"fitness {leader.fitness:.3f} < {rules.confirm_ratio:.2f} x its running level {level:.3f}"
                if level is not None and not confirmed else "no running level yet" if level is None
                else f"{evidence.offset[0]:.2f} m from the motion prediction")
         if not evidence.searched:
             return Verdict(Outcome.UNSETTLED, f"unconfirmed: {why}", Needs.SEARCH)
-        if not (confirmed or level is None or (evidence.near and not expected.after_gap)):
+        if not (confirmed or level is None or (evidence.expected and not expected.after_gap)):
             return Verdict(Outcome.FAILED, f"unconfirmed: {why}, away from the motion prediction")
     if leader.signals.conditioning < rules.neighbour_conditioning and not evidence.neighbours_checked:
         return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)

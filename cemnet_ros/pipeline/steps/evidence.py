@@ -4,20 +4,23 @@
   one's by less than ``(1 - health.tie_ratio)`` x its fitness (a *near-tie*: the scene cannot settle them) the one
   nearest the prediction, so that a distant answer never replaces a near one of similar consistency;
 - its **rival**: the most consistent answer distinct from it, and the **margin** it leads by;
-- where it lies against the **expectation**: its offset from the prediction along the directions the scene
-  constrains, within ``near`` or not, and the running fitness **level** of the vouched steps;
+- its **support**: the kinds of start that reached it;
+- where it lies against the **expectation**: the prediction *expects* it when the prediction's own polish
+  converged within reach of it, the prediction's start (fine or from afar) reached it, or it lies within
+  ``near`` of the prediction along the directions the scene constrains; and the running fitness **level** of the
+  vouched steps;
 - which starts have competed: the global **search** (independent of the prediction), the leader's rotational
   **neighbours** (its basin checked on a weakly constrained view).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
 from cemnet_ros.pipeline.config import HealthConfig
-from cemnet_ros.pipeline.steps.answer import Answer, distinct
+from cemnet_ros.pipeline.steps.answer import Answer, Origin, distinct
 from cemnet_ros.pipeline.steps.covariance import keep_prediction_along
 from cemnet_ros.pipeline.steps.health import disagreement
 
@@ -41,17 +44,20 @@ class Evidence:
     leader: Optional[Answer]  # None: no answer at all (``missing`` says why)
     tied: tuple[Answer, ...]  # the distinct near-ties, the leader among them (empty: no near-tie)
     rival: Optional[Answer]  # the most consistent answer distinct from the leader
+    support: frozenset[Origin]  # the kinds of start that reached the leader
     offset: tuple[float, float]  # (m, rad) of the leader from the prediction along the constrained directions
     searched: bool  # the global search's hypotheses have competed
     neighbours_checked: bool  # the leader's rotational neighbours have competed
     missing: str = ""
 
     @classmethod
-    def of(cls, answers: Sequence[Answer], expectation: Expectation, rules: HealthConfig, *, searched: bool,
-           neighbours_checked: bool, missing: str = "") -> "Evidence":
-        """The record of ``answers`` (see the module)."""
+    def of(cls, answers: Sequence[Answer], expectation: Expectation, rules: HealthConfig, *,
+           support: Callable[[Answer], frozenset[Origin]], searched: bool, neighbours_checked: bool,
+           missing: str = "") -> "Evidence":
+        """The record of ``answers`` (see the module); ``support``: the kinds of start that reached an answer."""
         if not answers:
-            return cls(expectation, None, (), None, (np.inf, np.inf), searched, neighbours_checked, missing)
+            return cls(expectation, None, (), None, frozenset(), (np.inf, np.inf), searched, neighbours_checked,
+                       missing)
         ranked = sorted(answers, key=lambda a: -a.consistency)
         best = ranked[0]
         margin = (1.0 - rules.tie_ratio) * best.fitness
@@ -64,13 +70,19 @@ class Evidence:
         nearest = int(np.argmin([metres for metres, _ in offsets]))
         leader = tied[nearest]
         rival = next((a for a in ranked if distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)
-        return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, offsets[nearest], searched,
-                   neighbours_checked, missing)
+        return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, support(leader),
+                   offsets[nearest], searched, neighbours_checked, missing)
 
     @property
     def near(self) -> bool:
         """The leader lies within ``near`` of the prediction along the constrained directions."""
         return self.offset[0] <= self.expectation.near[0] and self.offset[1] <= self.expectation.near[1]
+
+    @property
+    def expected(self) -> bool:
+        """The prediction expects the leader (see the module)."""
+        assert self.leader is not None
+        return self.leader.explained or Origin.PREDICTION in self.support or self.near
 
     @property
     def margin(self) -> float:
