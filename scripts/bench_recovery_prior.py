@@ -47,7 +47,7 @@ from cemnet_ros.io.atomic import json_text, write_report  # noqa: E402
 from cemnet_ros.io.console import log  # noqa: E402
 from cemnet_ros.pipeline.aligner import ScanAligner  # noqa: E402
 from cemnet_ros.pipeline.config import AlignerConfig  # noqa: E402
-from cemnet_ros.pipeline.steps.recovery import prior_registrar  # noqa: E402
+from cemnet_ros.pipeline.steps.metric_cem import prior_registrar  # noqa: E402
 
 LEAN = {"n_seeds": 4, "n_per_seed": 25, "n_hypotheses": 2}  # vs the defaults 16, 50, 4
 NOISE = "timings noisy, machine shared"

@@ -152,7 +152,7 @@ class ScanAligner:
         registered = self._registration.register(
             frame, self._map, T_predicted, level=self._level.level, search_because=self._pending_recovery,
             T_last=self._pose, dt_ratio=self._motion.dt_ratio(stamp_ns), effort=effort,
-            after_gap=(stamp_ns - last_stamp) * 1e-9 > self.config.recovery.gap, T_fallback=self._T_odom_last_insert)
+            moving=self._motion.has_velocity, T_fallback=self._T_odom_last_insert)
         return self._commit(frame, stamp_ns, T_predicted, registered, start)
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
@@ -179,6 +179,7 @@ class ScanAligner:
         self._T_odom_last_insert = T_odom_sensor.copy()
         self._pose_vs_map = np.zeros((6, 6))  # the map is this scan where it is: no error against it
         self._sweep.map_restarted(T_odom_sensor)
+        self._level.reset()  # what right answers fit depends on the scene: the new map's steps set it again
         self._pending_recovery = ""
         self._failures_in_a_row = 0
         self._lost.reset()

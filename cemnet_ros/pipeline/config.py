@@ -180,8 +180,6 @@ class RecoveryConfig:
                                    "over the full circle", low=0.0)
     points: int = param(512, "source and map points the global search scores (the polish brings the "
                                  "precision)", low=32)
-    gap: float = param(1.0, "after a stamp gap longer than this (s) tracking's answer must fit at "
-                       "health.confirm_ratio x the running level, or the global search competes with it", low=1e-3)
     turn_yaw: float = param(90.0, "the search also polishes the last pose turned about its z axis by up to "
                             "this (deg) either way; 0 = no turns", low=0.0, high=180.0)
     turn_step: float = param(30.0, "... in steps of this (deg: about the wide polish's reach)", low=1.0, high=180.0)

@@ -2,9 +2,9 @@
 
 The same steps as sequential mode (:mod:`.aligner`) against a map built from the target alone: check both
 clouds, then register (:mod:`.steps.registration`): from the constant-velocity prediction of the source's pose,
-the global search competing when there is no pose yet or the cheaper starts do not settle it. A target has no
-running fitness level: an answer stands on the search's evidence (:mod:`.steps.decision`). A reused target (the
-same array) is prepared once.
+the global search competing when there is no pose yet or the cheaper starts do not settle it. The running fitness
+level is the vouched steps' against the current target: a new target starts without one, and its first answer
+stands on the search's evidence (:mod:`.steps.decision`). A reused target (the same array) is prepared once.
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.alignment_step import AlignmentStep
 from cemnet_ros.pipeline.steps.frame import Preprocessor
+from cemnet_ros.pipeline.steps.health import RunningLevel
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
 from cemnet_ros.pipeline.steps.registration import Registration
@@ -36,12 +37,14 @@ class PairMode:
         self.target_checks = InputChecks(dataclasses.replace(config.checks, stamp_jump=0.0))
         self.registration = registration
         self._motion = ConstantVelocity()
+        self._level = RunningLevel(config.health.level_memory)
         self._targets: dict[int, tuple[np.ndarray, VoxelMap]] = {}
         self.reset()
 
     def reset(self) -> None:
         """Forget the source's motion, the last target and the target stream's frame."""
         self._motion.reset()
+        self._level.reset()
         self._last_stamp: Optional[int] = None
         self._targets.clear()
         self.target_checks.forget_frame()
@@ -63,12 +66,14 @@ class PairMode:
             self._motion.reset()
         previous = self._motion.last_pose
         T_predicted, why = (np.eye(4), "no pose yet") if previous is None else (self._motion.predict(stamp_ns), "")
-        registered = self.registration.register(frame, target_map, T_predicted, level=None, search_because=why,
-                                                T_last=previous)
+        registered = self.registration.register(frame, target_map, T_predicted, level=self._level.level,
+                                                search_because=why, T_last=previous, moving=self._motion.has_velocity)
         failed = registered.verdict.failed
         pose = T_predicted if registered.T_odom_sensor is None else registered.T_odom_sensor
         if not failed:
             self._motion.update(pose, stamp_ns)
+        if registered.verdict.vouched and registered.evidence.leader is not None:
+            self._level.accept(registered.evidence.leader.fitness)
         self._last_stamp = stamp_ns
         self.source_checks.passed(admitted)
         covariance = registered.covariance * (self.config.health.covariance_inflation if failed else 1.0)
@@ -91,6 +96,7 @@ class PairMode:
         except ScanRejected as exc:
             raise ScanRejected(f"target cloud: {exc}", f"target_{exc.kind}") from None
         self.target_checks.passed(admitted)
+        self._level.reset()  # what right answers fit against another target says nothing about this one
         frame = self.preprocessor.frame(admitted.points)
         self.preprocessor.adopt(frame)
         target_map = self.preprocessor.new_map()

@@ -28,9 +28,9 @@ def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, condit
                   Conditioning(values, np.eye(6), 10.0), 1e-4, pairs, explained)
 
 
-def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", after_gap=False,
+def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", moving=True,
              missing="") -> Evidence:
-    expectation = Expectation(at(0.0), NEAR, level, because, after_gap)
+    expectation = Expectation(at(0.0), NEAR, level, because, moving)
     return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}), searched=searched,
                        neighbours_checked=neighbours, missing=missing)
 
@@ -56,13 +56,12 @@ def test_a_confirmed_answer_away_from_the_prediction_waits_for_the_search_and_th
     assert decide(evidence(far, searched=True), RULES).outcome == Outcome.ACCEPTED
 
 
-def test_an_unconfirmed_answer_stands_after_the_search_only_next_to_a_prediction_it_can_trust():
+def test_an_unconfirmed_answer_stands_after_the_search_only_where_the_prediction_expects_it():
     low = RULES.confirm_ratio * LEVEL - 0.02
     assert decide(evidence(answer(fitness=low, explained=True)), RULES).needs == Needs.SEARCH
     assert decide(evidence(answer(fitness=low), searched=True), RULES).outcome == Outcome.ACCEPTED
-    assert decide(evidence(answer(fitness=low), searched=True, after_gap=True), RULES).outcome == Outcome.FAILED
     away = decide(evidence(answer(x=3.0, fitness=low), searched=True), RULES)
-    assert away.outcome == Outcome.FAILED and "away from the motion prediction" in away.reason
+    assert away.outcome == Outcome.FAILED and "3.00 m / 0.0 deg from the motion prediction" in away.reason
     reached = decide(evidence(answer(x=3.0, fitness=low, origin=Origin.PREDICTION), searched=True), RULES)
     assert reached.outcome == Outcome.ACCEPTED  # the prediction's own polish from afar reached it
 
@@ -73,9 +72,13 @@ def test_a_reason_given_makes_the_search_compete_first():
     assert decide(evidence(answer(explained=True), because="x", searched=True), RULES).outcome == Outcome.ACCEPTED
 
 
-def test_without_a_running_level_the_search_decides():
-    assert decide(evidence(answer(), level=None), RULES).needs == Needs.SEARCH
-    assert decide(evidence(answer(), level=None, searched=True), RULES).outcome == Outcome.ACCEPTED
+def test_without_a_running_level_the_search_decides_and_a_known_motion_must_expect_the_answer():
+    assert decide(evidence(answer(), level=None, moving=False), RULES).needs == Needs.SEARCH
+    first_pair = decide(evidence(answer(x=3.0), level=None, moving=False, searched=True), RULES)
+    assert first_pair.outcome == Outcome.ACCEPTED
+    restarted = decide(evidence(answer(x=3.0), level=None, searched=True), RULES)  # "no motion" after 3 m a step
+    assert restarted.outcome == Outcome.FAILED and "3.00 m" in restarted.reason
+    assert decide(evidence(answer(x=0.2), level=None, searched=True), RULES).outcome == Outcome.ACCEPTED
 
 
 def test_near_ties_wait_for_the_search_then_keep_the_one_next_to_the_prediction_or_fail_as_ambiguous():

@@ -1,10 +1,10 @@
-"""Adaptive spread, failure signals, Hessian covariance and degenerate directions (no engine needed)."""
+"""Adaptive spread, the running level, Hessian covariance and degenerate directions (no engine needed)."""
 import numpy as np
 import pytest
 from street_scene import make_transform
 
 from cemnet_ros.core.geometry import so3_exp, so3_log
-from cemnet_ros.pipeline.config import AdaptiveConfig, HealthConfig
+from cemnet_ros.pipeline.config import AdaptiveConfig
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.covariance import (
     MIN_STD_ROTATION,
@@ -15,7 +15,7 @@ from cemnet_ros.pipeline.steps.covariance import (
     keep_prediction_along,
     moved_by,
 )
-from cemnet_ros.pipeline.steps.health import HealthMonitor, Signals
+from cemnet_ros.pipeline.steps.health import RunningLevel, Signals
 
 GOOD = Signals(fitness=0.8, disagreement_m=0.05, disagreement_rad=0.005, conditioning=0.3, spread_m=0.1)
 
@@ -47,45 +47,15 @@ def test_spread_is_clipped():
         AdaptiveConfig(min_rotation=0.5, max_rotation=0.1)
 
 
-def test_each_failure_signal_flags_on_its_own():
-    monitor = HealthMonitor(HealthConfig())
-    assert monitor.failures(GOOD) == [] and not monitor.degenerate(GOOD)
-    assert "low fitness" in monitor.failures(with_(fitness=0.1))[0]
-    # the CEM's disagreement with the polish and its spread are recorded, not judged: they are in engine units
-    assert monitor.failures(with_(disagreement_m=2.0, disagreement_rad=0.2, spread_m=5.0)) == []
-    assert monitor.degenerate(with_(conditioning=0.001)) and monitor.failures(with_(conditioning=0.001)) == []
-
-
-def test_fitness_is_judged_against_its_running_level():
-    monitor = HealthMonitor(HealthConfig(min_fitness=0.2, fitness_drop=0.7, level_memory=0.5))
-    assert monitor.failures(with_(fitness=0.4)) == []  # no level yet: the absolute floor only
-    for _ in range(20):
-        monitor.accept(0.9)
-    assert monitor.level == pytest.approx(0.9)
-    assert "running level" in monitor.failures(with_(fitness=0.5))[0]
-    assert monitor.failures(with_(fitness=0.7)) == []
-    monitor.reset()
-    assert monitor.level is None
-
-
-def test_an_answer_below_the_level_needs_a_second_start_and_after_a_gap_the_level_itself():
-    monitor = HealthMonitor(HealthConfig(confirm_ratio=0.9))
-    assert monitor.unconfirmed(0.1, 1) == ""  # no level yet: nothing to confirm against
-    monitor.accept(0.8)
-    assert monitor.unconfirmed(0.75, 1) == ""  # at 0.9 x the level
-    assert "one start only" in monitor.unconfirmed(0.6, 1)
-    assert monitor.unconfirmed(0.6, 2) == ""  # two starts reached it
-    assert "stamp gap" in monitor.unconfirmed(0.6, 3, after_gap=True)
-    assert monitor.unconfirmed(0.75, 1, after_gap=True) == ""
-
-
-def test_an_answer_that_covers_the_scan_is_confirmed_by_its_coverage():
-    monitor = HealthMonitor(HealthConfig(confirm_ratio=0.9, confirm_coverage=0.95))
-    monitor.accept(0.8)
-    assert "one start only" in monitor.unconfirmed(0.6, 1, coverage=0.94)
-    assert monitor.unconfirmed(0.6, 1, coverage=0.95) == ""
-    assert monitor.unconfirmed(0.6, 1, after_gap=True, coverage=0.97) == ""
-    assert monitor.covers(0.95) and not monitor.covers(0.94)
+def test_the_running_level_follows_the_vouched_fitness_until_reset():
+    level = RunningLevel(memory=0.5)
+    assert level.level is None
+    level.accept(0.8)
+    assert level.level == pytest.approx(0.8)
+    level.accept(0.4)
+    assert level.level == pytest.approx(0.6)
+    level.reset()
+    assert level.level is None
 
 
 def test_consistency_is_the_share_on_surfaces_less_the_share_off_the_map():

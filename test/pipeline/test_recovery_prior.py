@@ -13,7 +13,7 @@ from cemnet_ros.core import Registrar
 from cemnet_ros.core.checkpoint import CheckpointError
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, RecoveryConfig
-from cemnet_ros.pipeline.steps.recovery import prior_registrar
+from cemnet_ros.pipeline.steps.metric_cem import prior_registrar
 from cemnet_ros.schema import build
 
 

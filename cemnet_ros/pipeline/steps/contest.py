@@ -63,8 +63,8 @@ class Contest:
         self.T_predicted = T_guess
 
     def evidence(self, near: tuple[float, float], level: Optional[float], rules: HealthConfig,
-                 search_because: str = "", after_gap: bool = False) -> Evidence:
+                 search_because: str = "", moving: bool = True) -> Evidence:
         """The record the decision reads (:class:`~.evidence.Evidence`)."""
-        expectation = Expectation(self.T_predicted, near, level, search_because, after_gap)
+        expectation = Expectation(self.T_predicted, near, level, search_because, moving)
         return Evidence.of(self.answers, expectation, rules, support=self.support, searched=self.searched,
                            neighbours_checked=self.neighbours_checked, missing=self.missing)

@@ -15,8 +15,9 @@ The rules, in the order :func:`decide` applies them (the first that applies deci
    expects it (:attr:`~.evidence.Evidence.expected`: the prediction's polish reached it or it lies within the
    prediction's spread): it stands without further starts. Anything else waits for the global search, whose
    starts are independent of the prediction; after it an answer stands when it is confirmed, or when the
-   prediction expects it, it still overlaps (rule 1) and the prediction was no extrapolation over a stamp gap. A
-   first pair has no level: it stands when the search found no near-tie.
+   prediction expects it and it still overlaps (rule 1). Without a running level (a first pair; a map restarted
+   after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where no
+   motion is known yet (a first pair), when the search found no near-tie.
 6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
    flat valley) waits for its rotational neighbours to compete (a near-tie then flags it, rule 3).
 7. Otherwise: *accepted*.
@@ -25,6 +26,8 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+
+import numpy as np
 
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.evidence import Evidence
@@ -98,8 +101,9 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
                else f"{evidence.offset[0]:.2f} m from the motion prediction")
         if not evidence.searched:
             return Verdict(Outcome.UNSETTLED, f"unconfirmed: {why}", Needs.SEARCH)
-        if not (confirmed or level is None or (evidence.expected and not expected.after_gap)):
-            return Verdict(Outcome.FAILED, f"unconfirmed: {why}, away from the motion prediction")
+        if not (confirmed or evidence.expected or (level is None and not expected.moving)):
+            return Verdict(Outcome.FAILED, f"unconfirmed: {why}, {evidence.offset[0]:.2f} m / "
+                                           f"{np.degrees(evidence.offset[1]):.1f} deg from the motion prediction")
     if leader.signals.conditioning < rules.neighbour_conditioning and not evidence.neighbours_checked:
         return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)
     return Verdict(Outcome.ACCEPTED)

@@ -33,7 +33,7 @@ class Expectation:
     near: tuple[float, float]  # (m, rad): how far from the prediction an answer is still the prediction's
     level: Optional[float]  # the running fitness of the vouched steps (None: none yet, e.g. the first pair)
     search_because: str = ""  # why the global search must compete whatever the answers ("": only if they need it)
-    after_gap: bool = False  # the time step was longer than recovery.gap: the prediction is an extrapolation
+    moving: bool = True  # the prediction extrapolates a motion (False: a first pair, a new target: none known)
 
 
 @dataclass(frozen=True)

@@ -61,19 +61,20 @@ class Registration:
 
     def register(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, *, level: Optional[float],
                  search_because: str = "", T_last: Optional[np.ndarray] = None, dt_ratio: float = 1.0,
-                 effort: float = 1.0, after_gap: bool = False, T_fallback: Optional[np.ndarray] = None
+                 effort: float = 1.0, moving: bool = True, T_fallback: Optional[np.ndarray] = None
                  ) -> Registered:
         """``frame`` registered against ``target_map`` near ``T_predicted``.
 
         ``level``: the running fitness of the vouched steps (None: none); ``search_because``: why the global search
         must compete whatever tracking finds; ``T_last``: the last pose; ``dt_ratio``: this time step over the usual
         one (it widens the prediction's spread); ``effort`` (0, 1]: the share of the polishes' and the search's
-        budgets (a live node behind its input); ``after_gap``: the time step was longer than ``recovery.gap``;
+        budgets (a live node behind its input); ``moving``: the prediction extrapolates a known motion (False: the
+        first pair);
         ``T_fallback``: where to search when the map has no points near the prediction.
         """
         contest = Contest(Polisher(self.config, frame, target_map, effort), T_predicted)
         starts = Starts(self.config, self.engine, self.spread, dt_ratio, T_last, T_fallback)
-        rotation, translation = self.spread.spread(dt_ratio)
+        rotation, translation = self.spread.spread()  # not stretched by a gap: "near" must stay a claim
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
         stages = starts.plan(contest, searched_first=bool(search_because))
         evidence, verdict, why = None, None, search_because
@@ -87,12 +88,12 @@ class Registration:
                 stages.pop(0)(contest)
             else:
                 break
-            evidence = contest.evidence(near, level, self.config.health, search_because, after_gap)
+            evidence = contest.evidence(near, level, self.config.health, search_because, moving)
             verdict = decide(evidence, self.config.health)
         assert evidence is not None and verdict is not None  # every plan has a stage
         prediction_std = self.config.recovery.radius if contest.searched else translation
-        return Registered(verdict, evidence, *self._published(evidence, verdict, prediction_std, frame),
-                          contest.searched, why, contest.polishes)
+        published = self._published(evidence, verdict, prediction_std, contest.polisher.frame)
+        return Registered(verdict, evidence, *published, contest.searched, why, contest.polishes)
 
     def _published(self, evidence: Evidence, verdict: Verdict, prediction_std: float, frame: Frame
                    ) -> tuple[Optional[np.ndarray], np.ndarray]:

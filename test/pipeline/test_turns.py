@@ -1,4 +1,4 @@
-"""The recovery's turns of the last pose: a grid of yaws and tilts about the sensor, the position kept."""
+"""The turns of the last pose: a grid of yaws and tilts about the sensor, the position kept."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ from street_scene import make_transform
 
 from cemnet_ros.core.geometry import rotation_angle_deg
 from cemnet_ros.pipeline.config import RecoveryConfig
-from cemnet_ros.pipeline.steps.recovery import turns
+from cemnet_ros.pipeline.steps.starts import turns
 
 
 def test_the_turns_span_the_yaws_and_tilts_about_the_pose_and_keep_its_position():
