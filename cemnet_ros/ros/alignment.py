@@ -70,11 +70,12 @@ class Alignment:
         if cfg.local_map_period > 0:
             self._timers.append(node.create_timer(cfg.local_map_period, self._publish_local_map))
 
-    def engine_ready(self, seconds: float) -> None:
-        """The session's engine has loaded (in ``seconds``): scans queued meanwhile are processed now."""
+    def engine_ready(self, seconds: float, detail: str = "") -> None:
+        """The session's engine has loaded (in ``seconds``; ``detail``: how its kernels came): scans queued meanwhile
+        are processed now."""
         self.status.ready = True
         drops = self._worker.stats().drops
-        self._node.get_logger().info(f"engine ready after {seconds:.1f} s" +
+        self._node.get_logger().info(f"engine ready after {seconds:.1f} s" + (f" ({detail})" if detail else "") +
                                      (f"; {drops} scans dropped meanwhile (queue_size {self._cfg.queue_size})"
                                       if drops else ""))
 
