@@ -5,9 +5,10 @@ second; one that does not compiles them at its first scans (about a minute on 2 
 overflows. A warm-up (:func:`warm_up`: the node's pipeline on a few synthetic scans, so that every kernel a scan
 reaches is compiled with the argument types the node passes) that ran to the end leaves a mark in the cache folder
 (:data:`MARK`) naming what numba's cached code depends on: the kernel sources' paths, sizes and modification times
-(numba's own staleness check), numba's version and the CPU it compiled for. :func:`cache_complete` compares the mark
-with this process, so a node can warm up before it subscribes exactly when its first scans would compile
-(``cemnet-warm-kernels`` runs the same warm-up ahead, e.g. after a build).
+(numba's own staleness check), numba's version, and the target and CPU it compiled for (numba's key of cached
+code). :func:`cache_complete` compares the mark with this process, so a node can warm up before it subscribes
+exactly when its first scans would compile (``cemnet-warm-kernels`` runs the same warm-up ahead, e.g. after a
+build).
 """
 from __future__ import annotations
 
@@ -70,7 +71,7 @@ def run_workload(n_scans: int = 3) -> None:
 def cache_mark(package: Optional[Path] = None) -> dict[str, Any]:
     """What the cached kernels depend on, for this process and the kernel sources under ``package``."""
     import numba
-    from llvmlite import binding
+    from numba.core.registry import cpu_target
 
     from cemnet_ros.core.kernel_cache import PACKAGE, SOURCES
 
@@ -79,9 +80,9 @@ def cache_mark(package: Optional[Path] = None) -> dict[str, Any]:
     for name in SOURCES:
         stat = (package / name).stat()
         sources[str(package / name)] = [stat.st_mtime, stat.st_size]
-    cpu = numba.config.CPU_NAME or binding.get_host_cpu_name()  # type: ignore[attr-defined]
-    features = numba.config.CPU_FEATURES or binding.get_host_cpu_features().flatten()  # type: ignore[attr-defined]
-    return {"numba": numba.__version__, "cpu": cpu, "cpu_features": features, "sources": sources}
+    # numba's own key of cached machine code: (target triple, CPU name, CPU features)
+    triple, cpu, features = cpu_target.target_context.codegen().magic_tuple()
+    return {"numba": numba.__version__, "target": triple, "cpu": cpu, "cpu_features": features, "sources": sources}
 
 
 def cache_folder() -> Optional[str]:

@@ -50,7 +50,8 @@ def test_another_install_numba_or_cpu_voids_the_mark(tmp_path, package):
     folder = tmp_path / "cache"
     _mark(folder, package)
     assert not cache_complete(str(folder), kernel_cache.PACKAGE)  # the same sources elsewhere: numba's own paths
-    for changes in ({"numba": "0.0.0"}, {"cpu": "another-cpu"}, {"cpu_features": "+sse2"}):
+    for changes in ({"numba": "0.0.0"}, {"target": "aarch64-unknown-linux-gnu"}, {"cpu": "another-cpu"},
+                    {"cpu_features": "+sse2"}):
         _mark(folder, package, **changes)
         assert not cache_complete(str(folder), package), changes
 
