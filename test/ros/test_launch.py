@@ -164,3 +164,15 @@ def test_rviz_config_parses_and_shows_the_node_outputs():
     assert topics["PointCloud2"] == {"/points", "/align_node/aligned_cloud", "/align_node/local_map"}
     (odometry,) = [display for display in manager["Displays"] if display["Class"].endswith("/Odometry")]
     assert odometry["Covariance"]["Value"] is True
+
+
+def test_autostart_activates_after_configure_only():
+    """'inactive' is reached by configure and by a deactivate: activating on the latter would undo a manager's or
+    a user's deactivate. The handler waits for configuring -> inactive, and configure follows the process start."""
+    tree = launch_tree()
+    (on_state,) = calls(tree, "OnStateTransition")
+    assert (constant(keyword(on_state, "start_state")), constant(keyword(on_state, "goal_state"))) == \
+        ("configuring", "inactive")
+    (on_start,) = calls(tree, "OnProcessStart")
+    assert getattr(keyword(on_start, "target_action"), "id", None) == getattr(
+        keyword(on_state, "target_lifecycle_node"), "id", None) == "node"
