@@ -57,6 +57,7 @@ class Develop(develop):
         for args in ScriptWriter.best().get_args(dist, header):
             self.write_script(*args)
 
+
 setup(
     name=package_name,
     version=version,
@@ -78,8 +79,9 @@ setup(
         # The CPU wheel is pinned in requirements.txt (torch==2.13.0); an unpinned install pulls a CUDA build.
         "torch>=2.2",
         "tqdm>=4.60",
+        # the tools' figures and depth PNGs, not the node's: package.xml leaves them out (cemnet_ros/io/optional.py)
         "matplotlib>=3.7",
-        "pillow>=9",  # depth PNGs (7-Scenes); matplotlib needs it too
+        "pillow>=9",
         "rosbags>=0.10",
         "mcap>=1.1",
         "pyyaml>=6.0",
