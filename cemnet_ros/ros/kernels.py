@@ -11,7 +11,8 @@ import time
 from typing import Any, Optional
 
 from cemnet_ros.runtime.aligner_session import AlignerSession
-from cemnet_ros.runtime.kernel_warmup import cache_complete, cache_counts, cache_folder, warm_up
+from cemnet_ros.runtime.kernel_warmup import cache_complete, cache_counts, cache_folder
+from cemnet_ros.tools.warm_kernels import warm_up
 
 AHEAD = "`ros2 run cemnet_ros cemnet-warm-kernels` after a build does it ahead"
 

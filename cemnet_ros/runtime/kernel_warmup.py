@@ -1,25 +1,21 @@
-"""The numba kernels' warm-up: is this install's kernel cache complete, and compiling it when it is not.
+"""Whether this install's numba kernel cache is complete: the mark a finished warm-up leaves, and the check.
 
 A process that finds the kernels in numba's disk cache (:mod:`cemnet_ros.core.kernel_cache`) loads them in about a
 second; one that does not compiles them at its first scans (about a minute on 2 cores), while a node's queue
-overflows. A warm-up (:func:`warm_up`: the node's pipeline on a few synthetic scans, so that every kernel a scan
-reaches is compiled with the argument types the node passes) that ran to the end leaves a mark in the cache folder
-(:data:`MARK`) naming what numba's cached code depends on: the kernel sources' paths, sizes and modification times
-(numba's own staleness check), numba's version, and the target and CPU it compiled for (numba's key of cached
-code). :func:`cache_complete` compares the mark with this process, so a node can warm up before it subscribes
-exactly when its first scans would compile (``cemnet-warm-kernels`` runs the same warm-up ahead, e.g. after a
-build).
+overflows. A warm-up (:func:`cemnet_ros.tools.warm_kernels.warm_up`: the node's pipeline on a few synthetic scans)
+that ran to the end leaves a mark in the cache folder (:data:`MARK`, :func:`mark_complete`) naming what numba's
+cached code depends on: the kernel sources' paths, sizes and modification times (numba's own staleness check),
+numba's version, and the target and CPU it compiled for (numba's key of cached code). :func:`cache_complete`
+compares the mark with this process, so a node warms up before it subscribes exactly when its first scans would
+compile. :func:`cache_counts` says how many kernel versions a process loaded and compiled.
 """
 from __future__ import annotations
 
 import importlib
 import json
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
-
-import numpy as np
 
 MARK = "complete.json"
 
@@ -53,19 +49,6 @@ def cache_counts() -> tuple[int, int]:
                 loaded += sum(value.stats.cache_hits.values())
                 compiled += sum(value.stats.cache_misses.values())
     return loaded, compiled
-
-
-def run_workload(n_scans: int = 3) -> None:
-    """The node's pipeline (default parameters) over ``n_scans`` synthetic scans, with and without point times."""
-    from cemnet_ros.data.scenes import LidarModel
-    from cemnet_ros.data.skewed import skewed_sequence
-    from cemnet_ros.pipeline.aligner import ScanAligner
-
-    sequence = skewed_sequence(n_scans, lidar=LidarModel(n_beams=16, n_azimuth=500))
-    for with_times in (True, False):
-        aligner = ScanAligner()
-        for points, times, stamp_ns in zip(sequence.scans, sequence.times, sequence.stamps_ns):
-            aligner.process(points.astype(np.float64), stamp_ns, times if with_times else None)
 
 
 def cache_mark(package: Optional[Path] = None) -> dict[str, Any]:
@@ -105,15 +88,8 @@ def cache_complete(folder: Optional[str] = None, package: Optional[Path] = None)
     return mark == cache_mark(package)
 
 
-def warm_up() -> WarmUp:
-    """Run the workload (compiling what the cache lacks) and mark the cache complete; the counts are this call's."""
+def mark_complete(folder: str) -> None:
+    """Mark ``folder`` complete for this process's kernels: a warm-up has just run to the end there."""
     from cemnet_ros.io.atomic import atomic_write_text
 
-    start = time.monotonic()
-    loaded_before, compiled_before = cache_counts()
-    run_workload()
-    loaded, compiled = cache_counts()
-    folder = cache_folder()
-    if folder is not None:
-        atomic_write_text(Path(folder) / MARK, json.dumps(cache_mark(), indent=1))
-    return WarmUp(compiled - compiled_before, loaded - loaded_before, time.monotonic() - start, folder)
+    atomic_write_text(Path(folder) / MARK, json.dumps(cache_mark(), indent=1))

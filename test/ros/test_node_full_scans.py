@@ -15,6 +15,7 @@ import random
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ import pytest
 from benchmarks.dds_probe import PROFILE, dds_environment, node_log, start_node
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow]
+REPO = Path(__file__).resolve().parents[2]
 
 N_SCANS = 50
 NS = "/full"
@@ -30,6 +32,8 @@ NS = "/full"
 def test_full_size_scans_at_10_hz_all_arrive_and_each_is_processed_or_counted():
     env = {**os.environ, **dds_environment(), "FASTRTPS_DEFAULT_PROFILES_FILE": str(PROFILE),
            "ROS_DOMAIN_ID": str(random.randint(120, 200))}  # the shipped profile and a domain of its own
+    # this file run as a script imports benchmarks/, which only pytest puts on the path
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
     node = start_node(NS, {"qos_reliability": "best_effort"}, env=env)
     try:
         run = subprocess.run([sys.executable, __file__], env=env, capture_output=True, text=True, timeout=420)
