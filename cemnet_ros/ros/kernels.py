@@ -50,5 +50,5 @@ def counted_load(session: AlignerSession) -> tuple[Optional[float], str]:
     if seconds is None:
         return None, ""
     loaded, compiled = loaded_after - loaded, compiled_after - compiled
-    already = " (the warm-up before had loaded them)" if loaded == compiled == 0 else ""
+    already = "; already in this process" if loaded == compiled == 0 else ""
     return time.monotonic() - start, f"numba kernels: {loaded} loaded from the cache, {compiled} compiled{already}"
