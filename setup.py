@@ -1,13 +1,62 @@
-"""ament_python package definition; also a plain pip-installable package with console scripts."""
+"""ament_python package definition; also a plain pip-installable package with console scripts.
+
+The console scripts start ``/usr/bin/env python3`` (setup.cfg ``[build_scripts]``): the python3 on PATH when the node
+runs (an activated venv with torch), not the interpreter that built them (colcon's may be the system's). Before
+``install``/``develop`` (what colcon runs) that python3 is checked: a missing torch fails the build with the fix
+(cemnet_ros/tools/runtime_check.py). pip builds wheels (``install --root``) and writes its own scripts: no check.
+"""
+import importlib.util
+import os
 import re
 from glob import glob
 from pathlib import Path
 
 from setuptools import find_packages, setup
+from setuptools.command.develop import develop
+from setuptools.command.install import install
 
 package_name = "cemnet_ros"
 # The one version string is cemnet_ros.__version__ (package.xml repeats it: ament needs a literal; a test checks).
 version = re.search(r'__version__ = "([^"]+)"', (Path(__file__).parent / package_name / "__init__.py").read_text())[1]
+
+
+def check_runtime_python():
+    """Exit with the fix when the python3 that will run the executables cannot import the node's dependencies."""
+    path = Path(__file__).parent / package_name / "tools" / "runtime_check.py"
+    spec = importlib.util.spec_from_file_location("cemnet_runtime_check", path)
+    check = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(check)
+    if os.environ.get(check.SKIP_VARIABLE):
+        return
+    message = check.problem()
+    if message is not None:
+        raise SystemExit(message)
+
+
+class Install(install):
+    """``setup.py install`` (colcon build): the runtime check first, unless staging into a root (a wheel, a deb)."""
+
+    def run(self):
+        if not self.root:
+            check_runtime_python()
+        super().run()
+
+
+class Develop(develop):
+    """``setup.py develop`` (colcon build --symlink-install): the check, and the wrapper scripts with the same
+    ``/usr/bin/env python3`` line as ``install`` writes (develop would write the building interpreter's)."""
+
+    def run(self):
+        check_runtime_python()
+        super().run()
+
+    def install_wrapper_scripts(self, dist):
+        from setuptools.command.easy_install import ScriptWriter
+
+        header = ScriptWriter.get_header(executable=self.get_finalized_command("build_scripts").executable)
+        for args in ScriptWriter.best().get_args(dist, header):
+            self.write_script(*args)
+
 
 setup(
     name=package_name,
@@ -30,8 +79,9 @@ setup(
         # The CPU wheel is pinned in requirements.txt (torch==2.13.0); an unpinned install pulls a CUDA build.
         "torch>=2.2",
         "tqdm>=4.60",
+        # the tools' figures and depth PNGs, not the node's: package.xml leaves them out (cemnet_ros/io/optional.py)
         "matplotlib>=3.7",
-        "pillow>=9",  # depth PNGs (7-Scenes); matplotlib needs it too
+        "pillow>=9",
         "rosbags>=0.10",
         "mcap>=1.1",
         "pyyaml>=6.0",
@@ -42,12 +92,12 @@ setup(
         "open3d": ["open3d-cpu>=0.18"],
         "bench": ["kiss-icp", "genz-icp", "evo"],
     },
+    cmdclass={"install": Install, "develop": Develop},
     zip_safe=True,
     maintainer="cemnet_ros maintainers",
     maintainer_email="maintainers@cemnet-ros.invalid",
     description="Online point cloud alignment with CEMNet for ROS 2",
     license="MIT",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "align_node = cemnet_ros.ros.entry_points:align_node",

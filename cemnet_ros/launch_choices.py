@@ -1,5 +1,5 @@
 """The launch file's decisions as plain code (testable without ``launch``): whether to start RViz2, which Fast
-DDS profile the processes get.
+DDS profile the processes get, whether the node is the lifecycle one and the launch file brings it up.
 
 ``rviz:=auto`` (the default) starts RViz2 only where it is installed, so that the default launch works on a
 headless robot or in a container; ``rviz:=true`` asks for it and fails before anything starts when it is missing.
@@ -45,3 +45,18 @@ def dds_profile_file(value: str) -> Optional[str]:
         raise LaunchChoiceError(f"dds_profile:={value}: no such file (dds_profile:=none for Fast DDS's defaults); "
                                 "nothing was started")
     return path
+
+
+def _flag(name: str, value: str) -> bool:
+    choice = value.strip().lower()
+    if choice not in TRUE + FALSE:
+        raise LaunchChoiceError(f"{name}:={value!r}: expected true or false")
+    return choice in TRUE
+
+
+def lifecycle_wanted(lifecycle: str, autostart: str) -> tuple[bool, bool]:
+    """(start align_lifecycle_node instead of align_node, configure and activate it from the launch file) from the
+    ``lifecycle`` and ``autostart`` arguments; autostart means nothing without lifecycle. LaunchChoiceError for a
+    value that is not true or false."""
+    managed, bring_up = _flag("lifecycle", lifecycle), _flag("autostart", autostart)
+    return managed, managed and bring_up

@@ -14,8 +14,11 @@ if [ ! -d "$SHARED/wheels" ]; then
 fi
 # Not launch_testing*: their pytest plugin fails to load under the pytest installed here, and nothing needs them.
 WHEELS=$(ls "$SHARED"/wheels/*.whl | grep -v '/launch_testing')
+# Their PyPI dependencies first, then the wheels themselves without a resolver run: launch_ros's metadata names
+# `ament-index-python`, a distribution no index has (the module is ros-jazzy-ament-index-python's, which the rclpy
+# wheels bring), so pip's resolver would report it missing although `import ament_index_python` works.
+"$VENV/bin/python" -m pip install -q --disable-pip-version-check osrf-pycommon psutil ros-jazzy-ament-index-python
 # shellcheck disable=SC2086
 "$VENV/bin/python" -m pip install -q --disable-pip-version-check --no-deps $WHEELS
-"$VENV/bin/python" -m pip install -q --disable-pip-version-check osrf-pycommon psutil
 VENV="$VENV" bash "$ROOT/scripts/build_interface_package.sh" "$SHARED/src/composition_interfaces"
 "$VENV/bin/python" -c "import launch_ros.actions, ros2cli" && echo "install_shared_ros2: ok, launch_ros and ros2cli importable"

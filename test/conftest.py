@@ -15,6 +15,11 @@ def compiled_kernels(request):
     if any(Path(item.path).parent.name in KERNEL_FOLDERS for item in request.session.items):
         from cemnet_ros.core import lattice_rewards
         from cemnet_ros.pipeline.steps import preprocess, refine
+        from cemnet_ros.runtime.kernel_warmup import cache_complete
+        from cemnet_ros.tools.warm_kernels import warm_up
+
+        if not cache_complete():  # else the first node made in a test would warm up (cemnet_ros/ros/kernels.py)
+            warm_up()
 
         lattice_rewards.compile_kernels()
         preprocess.compile_kernels()

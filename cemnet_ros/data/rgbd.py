@@ -14,6 +14,8 @@ from typing import Iterator, Tuple, Union
 
 import numpy as np
 
+from cemnet_ros.io.optional import optional_module
+
 INVALID_DEPTH_MM = (0, 65535)  # 7-Scenes marks pixels without a reading with either value
 INTRINSICS_FILE = "camera-intrinsics.txt"
 FRAMES_DIR = "rgbd-frames"
@@ -54,7 +56,7 @@ def read_intrinsics(root: Union[str, Path]) -> Intrinsics:
 
 def read_depth_png(path: Union[str, Path]) -> np.ndarray:
     """A uint16 millimetre depth PNG as metres (float64), pixels without a reading set to 0."""
-    from PIL import Image  # pillow: an install requirement (matplotlib needs it too)
+    Image = optional_module("PIL.Image", "reading 7-Scenes depth PNGs")  # MissingOptional without Pillow
 
     with Image.open(path) as image:
         raw = np.asarray(image)

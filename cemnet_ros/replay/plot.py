@@ -9,6 +9,7 @@ from typing import Optional
 import numpy as np
 
 from cemnet_ros.io.atomic import atomic_write_bytes
+from cemnet_ros.io.optional import optional_module
 from cemnet_ros.replay.trajectory import RPEResult
 
 
@@ -38,7 +39,8 @@ def save_replay_plot(path: str | os.PathLike, estimate: np.ndarray, ground_truth
                      rpe: Optional[RPEResult] = None, title: str = "") -> Path:
     """Write the figure atomically. ``estimate``/``ground_truth``: (n,4,4) poses, the estimate already
     aligned onto the ground truth (see ATEResult.alignment); without ground truth only the path is drawn."""
-    from matplotlib.figure import Figure  # no pyplot: Agg canvas, no global state, safe from threads
+    # no pyplot: Agg canvas, no global state, safe from threads; MissingOptional without matplotlib
+    Figure = optional_module("matplotlib.figure", "the replay figure (replay.png)").Figure
 
     est = np.asarray(estimate, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]
     gt = None if ground_truth is None else np.asarray(ground_truth, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]

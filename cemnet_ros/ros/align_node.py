@@ -1,8 +1,10 @@
 """``align_node``: CEMNet point cloud alignment as a ROS 2 odometry node.
 
 The ROS layer converts, queues and publishes (:mod:`.alignment`); what it decides is plain code in
-:mod:`cemnet_ros.pipeline`. A background thread loads the engine, so that the subscriptions exist at once and early
-scans wait in the queue. ``align_lifecycle_node`` (:mod:`.align_lifecycle_node`) is the managed variant.
+:mod:`cemnet_ros.pipeline`. The numba kernels are compiled before it subscribes when their cache is not complete
+(:mod:`.kernels`: the first start after a build); then a background thread loads the engine, so that the
+subscriptions exist at once and early scans wait in the queue. ``align_lifecycle_node``
+(:mod:`.align_lifecycle_node`) is the managed variant.
 
 Modes: ``sequential`` registers each ``input_topic`` scan against a local map (odometry of ``base_frame`` in
 ``odom_frame``); ``pair`` aligns each ``source_topic`` scan to the ``target_topic`` cloud nearest in stamp (or
@@ -17,6 +19,7 @@ from typing import Any, Optional
 from rclpy.node import Node
 
 from cemnet_ros.ros.alignment import Alignment
+from cemnet_ros.ros.kernels import counted_load, prepare_kernels
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.ros.parameters import declare_and_read
 from cemnet_ros.ros.process import run
@@ -37,6 +40,7 @@ class AlignNode(Node):
         super().__init__("align_node", **kwargs)
         cfg, pipeline_config = declare_and_read(self)
         log_parameters(self, cfg, pipeline_config)
+        prepare_kernels(self.get_logger())  # compiled now when the cache lacks them: no scan waits for it
         self._session, extrinsic = new_session(cfg, pipeline_config)
         self.alignment = Alignment(self, cfg, self._session, extrinsic)
         threading.Thread(target=self._load, name="cemnet_load", daemon=True).start()
@@ -48,12 +52,12 @@ class AlignNode(Node):
         return self._session.fatal_error
 
     def _load(self) -> None:
-        """Import torch, load the weights and compile the kernels (seconds, a thread): scans queue meanwhile."""
-        seconds = self._session.load()
+        """Import torch, load the weights and the kernels (seconds, a thread): scans queue meanwhile."""
+        seconds, kernels = counted_load(self._session)
         if seconds is None:
             self.get_logger().error(self._session.fatal_error)
             return
-        self.alignment.engine_ready(seconds)
+        self.alignment.engine_ready(seconds, kernels)
 
     def destroy_node(self) -> None:
         self._session.close()  # a worker waiting for the engine gives up

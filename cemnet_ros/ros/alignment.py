@@ -72,11 +72,12 @@ class Alignment:
         if self._outputs.path is not None:
             self._timers.append(node.create_timer(cfg.path_period, self._outputs.path.publish))
 
-    def engine_ready(self, seconds: float) -> None:
-        """The session's engine has loaded (in ``seconds``): scans queued meanwhile are processed now."""
+    def engine_ready(self, seconds: float, detail: str = "") -> None:
+        """The session's engine has loaded (in ``seconds``; ``detail``: how its kernels came): scans queued meanwhile
+        are processed now."""
         self.status.ready = True
         drops = self._worker.stats().drops
-        self._node.get_logger().info(f"engine ready after {seconds:.1f} s" +
+        self._node.get_logger().info(f"engine ready after {seconds:.1f} s" + (f" ({detail})" if detail else "") +
                                      (f"; {drops} scans dropped meanwhile (queue_size {self._cfg.queue_size})"
                                       if drops else ""))
 

@@ -7,22 +7,24 @@ from typing import Any, Callable, Optional
 
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 
 from cemnet_ros.ros.parameters import ConfigError
 
 
-def run(make_node: Callable[[], Any], name: str, args: Optional[list] = None) -> None:
-    """Spin ``make_node()`` until SIGINT or its ``fatal_error``; a fatal configuration or engine error is one line
-    on stderr (``<name>: error: ...``) and exit status 2. A SIGINT at any point ends it with status 0."""
+def run(make_node: Callable[[], Any], name: str, args: Optional[list] = None,
+        executor: Callable[[], Executor] = SingleThreadedExecutor) -> None:
+    """Spin ``make_node()`` on ``executor()`` until SIGINT or its ``fatal_error``; a fatal configuration or engine
+    error is one line on stderr (``<name>: error: ...``) and exit status 2. A SIGINT at any point ends it with
+    status 0."""
     rclpy.init(args=args)
     node, error = None, None
     try:
         node = make_node()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
+        spinner = executor()
+        spinner.add_node(node)
         while rclpy.ok() and node.fatal_error is None:
-            executor.spin_once(timeout_sec=0.25)
+            spinner.spin_once(timeout_sec=0.25)
         error = node.fatal_error
     except (ConfigError, ParameterException) as exc:
         error = str(exc).splitlines()[0]

@@ -7,7 +7,10 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Iterator
 
-INPUT_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError)  # FileNotFoundError, PointCloudFileError, ...
+from cemnet_ros.io.optional import MissingOptional
+
+# FileNotFoundError, PointCloudFileError, ...; and an optional library the input needs (Pillow for depth PNGs)
+INPUT_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, MissingOptional)
 
 
 @dataclass

@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from cemnet_ros.io.atomic import write_report
+from cemnet_ros.io.optional import MissingOptional
 from cemnet_ros.io.report import Report
 from cemnet_ros.io.trajectory_files import write_tum
 from cemnet_ros.pipeline.config import AlignerConfig
@@ -167,15 +168,21 @@ def write_outputs(config: ReplayConfig, result: ReplayResult, acc: Optional[dict
     if len(gt[0]):
         files["ground_truth_tum"] = str(write_tum(out / "ground_truth_tum.txt", *gt))
     if config.plot:
-        from cemnet_ros.replay.plot import save_replay_plot
-
-        if acc and "ate" in acc:
-            est = np.einsum("ij,njk->nik", acc["_aligned"], acc["_est"])
-            save_replay_plot(out / "replay.png", est, acc["_gt"], acc["_rpe"], title=config.bag.name)
-        else:
-            save_replay_plot(out / "replay.png", np.stack(result.poses), title=config.bag.name)
-        files["plot"] = str(out / "replay.png")
+        try:
+            files["plot"] = str(_plot(out / "replay.png", config, result, acc))
+        except MissingOptional as exc:  # the figure only: the trajectory, report and bag are written
+            print(f"{PROG}: warning: replay.png not written: {exc} (--no-plot skips it)", file=sys.stderr)
     return files
+
+
+def _plot(path: Path, config: ReplayConfig, result: ReplayResult, acc: Optional[dict]) -> Path:
+    """replay.png: the estimate aligned onto the ground truth when there is one; MissingOptional without matplotlib."""
+    from cemnet_ros.replay.plot import save_replay_plot
+
+    if acc and "ate" in acc:
+        est = np.einsum("ij,njk->nik", acc["_aligned"], acc["_est"])
+        return save_replay_plot(path, est, acc["_gt"], acc["_rpe"], title=config.bag.name)
+    return save_replay_plot(path, np.stack(result.poses), title=config.bag.name)
 
 
 def build_summary(config: ReplayConfig, facts: dict[str, Any], result: ReplayResult, acc: Optional[dict],

@@ -4,10 +4,12 @@ from __future__ import annotations
 import csv
 import io
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
 from cemnet_ros.io.atomic import atomic_write_bytes, atomic_write_text
+from cemnet_ros.io.optional import MissingOptional, optional_module
 
 CSV_FIELDS = ("epoch", "global_step", "train_loss", "train_loss_final", "train_loss_prior", "train_loss_match",
               "train_loss_sigma", "skipped_batches",
@@ -35,8 +37,13 @@ def _series(rows: list[dict[str, Any]], key: str) -> tuple[list[int], list[float
 
 
 def write_curves(out_dir: Path, rows: list[dict[str, Any]]) -> None:
-    """``out_dir/curves.png``: the training losses, and the validation errors and recall per epoch."""
-    import matplotlib
+    """``out_dir/curves.png``: the training losses, and the validation errors and recall per epoch. Without
+    matplotlib a warning (once) instead: the checkpoints and log.csv are what training needs."""
+    try:
+        matplotlib = optional_module("matplotlib", "the training curves (curves.png)")
+    except MissingOptional as exc:
+        warnings.warn(f"curves.png not written: {exc}", RuntimeWarning, stacklevel=2)
+        return
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 

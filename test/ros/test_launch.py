@@ -36,10 +36,13 @@ def _declared_arguments(tree: ast.AST) -> dict:
 
 
 def _node_parameter_entries(tree: ast.AST) -> list:
-    nodes = [call for call in calls(tree, "Node") if constant(keyword(call, "package")) == PACKAGE]
-    assert len(nodes) == 1, "the launch file should start align_node once"
-    assert constant(keyword(nodes[0], "executable")) == "align_node"
-    parameters = keyword(nodes[0], "parameters")
+    """The parameters both nodes get (align_node and align_lifecycle_node: one list, named once)."""
+    nodes = [call for kind in ("Node", "LifecycleNode") for call in calls(tree, kind)
+             if constant(keyword(call, "package")) == PACKAGE]
+    assert [constant(keyword(node, "executable")) for node in nodes] == ["align_node", "align_lifecycle_node"]
+    assert {constant(keyword(node, "name")) for node in nodes} == {"align_node"}, "one node name, one params key"
+    assert len({ast.dump(keyword(node, "parameters")) for node in nodes}) == 1, "both get the same parameters"
+    parameters = _resolve(keyword(nodes[0], "parameters"), tree)
     assert isinstance(parameters, ast.List), "parameters= should be a literal list"
     return parameters.elts
 
@@ -56,7 +59,8 @@ def test_launch_arguments_and_defaults():
     arguments = _declared_arguments(launch_tree())
     defaults = {name: constant(default) for name, (default, _) in arguments.items()}
     assert defaults == {"input_topic": "points", "params_file": None, "use_sim_time": "false", "odom_frame": "odom",
-                        "base_frame": "base_link", "rviz": "auto", "bag": "", "dds_profile": None}
+                        "base_frame": "base_link", "rviz": "auto", "bag": "", "dds_profile": None,
+                        "lifecycle": "false", "autostart": "true"}
     assert all(description for _, description in arguments.values()), "every argument has a description"
     assert "use_sim_time:=true" in arguments["bag"][1]
 
@@ -116,11 +120,14 @@ def test_files_the_launch_file_takes_from_its_share_exist_and_are_installed():
 def test_rviz_the_dds_profile_and_the_bag_replay_are_decided_before_any_process_starts():
     tree = launch_tree()
     (start,) = [call for call in calls(tree, "OpaqueFunction")]
-    assert [getattr(arg, "id", None) for arg in keyword(start, "args").elts] == ["rviz", "bag_play", "align_node"]
+    assert [getattr(arg, "id", None) for arg in keyword(start, "args").elts] == ["rviz", "bag_play", "align_node",
+                                                                               "lifecycle_node"]
     (decide,) = [node for node in ast.walk(tree) if isinstance(node, ast.FunctionDef) and node.name == "_start"]
-    chosen = {call.func.id: _referenced_arguments(call.args[0], tree) for call in ast.walk(decide)
-              if isinstance(call, ast.Call) and getattr(call.func, "id", None) in ("rviz_wanted", "dds_profile_file")}
-    assert chosen == {"rviz_wanted": {"rviz"}, "dds_profile_file": {"dds_profile"}}
+    choices = ("rviz_wanted", "dds_profile_file", "lifecycle_wanted")
+    chosen = {call.func.id: [_referenced_arguments(arg, tree) for arg in call.args] for call in ast.walk(decide)
+              if isinstance(call, ast.Call) and getattr(call.func, "id", None) in choices}
+    assert chosen == {"rviz_wanted": [{"rviz"}, set()], "dds_profile_file": [{"dds_profile"}],
+                      "lifecycle_wanted": [{"lifecycle"}, {"autostart"}]}
     (rviz,) = [call for call in calls(tree, "Node") if constant(keyword(call, "package")) == "rviz2"]
     assert keyword(rviz, "condition") is None, "rviz_wanted decides, not a condition on the raw argument"
     (bag,) = calls(tree, "ExecuteProcess")
@@ -157,3 +164,15 @@ def test_rviz_config_parses_and_shows_the_node_outputs():
     assert topics["PointCloud2"] == {"/points", "/align_node/aligned_cloud", "/align_node/local_map"}
     (odometry,) = [display for display in manager["Displays"] if display["Class"].endswith("/Odometry")]
     assert odometry["Covariance"]["Value"] is True
+
+
+def test_autostart_activates_after_configure_only():
+    """'inactive' is reached by configure and by a deactivate: activating on the latter would undo a manager's or
+    a user's deactivate. The handler waits for configuring -> inactive, and configure follows the process start."""
+    tree = launch_tree()
+    (on_state,) = calls(tree, "OnStateTransition")
+    assert (constant(keyword(on_state, "start_state")), constant(keyword(on_state, "goal_state"))) == \
+        ("configuring", "inactive")
+    (on_start,) = calls(tree, "OnProcessStart")
+    assert getattr(keyword(on_start, "target_action"), "id", None) == getattr(
+        keyword(on_state, "target_lifecycle_node"), "id", None) == "node"

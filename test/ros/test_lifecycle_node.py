@@ -1,6 +1,7 @@
-"""align_lifecycle_node through rclpy's lifecycle services: configure loads the engine (no subscription yet),
-activate subscribes and publishes, deactivate stops and keeps the trajectory, cleanup drops it; a configure that
-cannot load fails and leaves the node unconfigured."""
+"""align_lifecycle_node through rclpy's lifecycle services: configure loads the engine (no subscription yet) while
+the parameter services keep answering, activate subscribes and publishes, deactivate stops and keeps the trajectory,
+cleanup drops it and a new configure loads it again; a configure that cannot load fails and leaves the node
+unconfigured."""
 from __future__ import annotations
 
 import os
@@ -13,15 +14,17 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from lifecycle_msgs.msg import Transition  # noqa: E402
+from lifecycle_msgs.msg import Transition, TransitionEvent  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from node_harness import EXTRINSIC, FAST, FIRST_TIMEOUT, POSES, StandInBuffer, pose_of, scan_msg, transform, wait_for  # noqa: E402
+from rcl_interfaces.srv import GetParameters  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
 from benchmarks.metrics import relative_error  # noqa: E402
+from cemnet_ros.ros import engine_load  # noqa: E402
 from cemnet_ros.ros.align_lifecycle_node import AlignLifecycleNode  # noqa: E402
 
 pytestmark = pytest.mark.dds
@@ -37,6 +40,10 @@ class Managed:
         ns = f"/{namespace}/align_node"
         self.change = self.probe.create_client(ChangeState, f"{ns}/change_state")
         self.get = self.probe.create_client(GetState, f"{ns}/get_state")
+        self.get_parameters = self.probe.create_client(GetParameters, f"{ns}/get_parameters")
+        self.transitions = []  # the goal states of ~/transition_event, in order
+        self.probe.create_subscription(TransitionEvent, f"{ns}/transition_event",
+                                       lambda msg: self.transitions.append(msg.goal_state.label), 10)
         self.points = self.probe.create_publisher(PointCloud2, f"/{namespace}/points", 10)
         self.odometry, self.diagnostics = [], []
         self.probe.create_subscription(Odometry, f"{ns}/odometry", self.odometry.append, 50)
@@ -112,6 +119,33 @@ def test_configure_activate_deactivate_cleanup(managed_factory):
     assert managed.transition(Transition.TRANSITION_DEACTIVATE)
     assert managed.transition(Transition.TRANSITION_CLEANUP)
     assert managed.state() == "unconfigured" and not managed.subscribed()
+    assert managed.transition(Transition.TRANSITION_CONFIGURE)  # the engine was dropped: loaded again
+    assert managed.state() == "inactive"
+
+
+def test_parameter_requests_are_answered_while_configure_waits_for_the_engine(managed_factory, monkeypatch):
+    """rclpy's transitions are synchronous: configure holds its executor thread until the engine has loaded. The
+    lifecycle services have their own callback group, so the parameter services still answer meanwhile."""
+    engine_may_load = threading.Event()
+    load = engine_load.counted_load
+
+    def held_back(session):
+        engine_may_load.wait()
+        return load(session)
+
+    monkeypatch.setattr(engine_load, "counted_load", held_back)  # the load started at construction waits
+    managed = managed_factory()
+    try:
+        configure = managed.change.call_async(ChangeState.Request(
+            transition=Transition(id=Transition.TRANSITION_CONFIGURE)))
+        assert wait_for(lambda: "configuring" in managed.transitions, 10.0), managed.transitions
+        answer = managed._call(managed.get_parameters, GetParameters.Request(names=["input_topic"]), 10.0)
+        assert [value.string_value for value in answer.values] == ["points"]
+        assert not configure.done() and managed.transitions == ["configuring"]
+    finally:
+        engine_may_load.set()
+    assert wait_for(configure.done, FIRST_TIMEOUT) and configure.result().success
+    assert managed.state() == "inactive"
 
 
 def test_a_configure_that_cannot_load_fails_and_stays_unconfigured(managed_factory):

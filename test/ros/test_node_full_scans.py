@@ -23,6 +23,7 @@ import pytest
 from benchmarks.dds_probe import PROFILE, dds_environment, node_log, start_node
 
 pytestmark = [pytest.mark.dds, pytest.mark.slow]
+REPO = Path(__file__).resolve().parents[2]
 
 N_SCANS = 50
 NS = "/full"
@@ -32,6 +33,8 @@ REPO = Path(__file__).resolve().parents[2]
 def test_full_size_scans_at_10_hz_all_arrive_and_each_is_processed_or_counted():
     env = {**os.environ, **dds_environment(), "FASTRTPS_DEFAULT_PROFILES_FILE": str(PROFILE),
            "ROS_DOMAIN_ID": str(random.randint(120, 200))}  # the shipped profile and a domain of its own
+    # this file run as a script imports benchmarks/, which only pytest puts on the path
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
     node = start_node(NS, {"qos_reliability": "best_effort"}, env=env)
     try:
         publisher_env = {**env, "PYTHONPATH": os.pathsep.join(  # the script imports benchmarks/ (not installed)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -14,17 +13,13 @@ import yaml
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS participant is created
 
 import rclpy  # noqa: E402
-from builtin_interfaces.msg import Time  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from install_layout import add_stand_in_executable, make_install_prefix, ros2_cli_missing, ros_environment  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
-from nav_msgs.msg import Odometry  # noqa: E402
-from node_harness import FIRST_TIMEOUT, pose_of, read_bag, wait_for  # noqa: E402
+from node_harness import FIRST_TIMEOUT, pose_of, read_bag, scan_msg, stamp, wait_for  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from ros_cli import domain_id, interrupt, kill_group, param_dump, start  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import PointCloud2  # noqa: E402
+from scan_driver import Driver  # noqa: E402
 
 from benchmarks.metrics import relative_error  # noqa: E402
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
@@ -172,8 +167,76 @@ def test_ros2_run_starts_the_lifecycle_node_unconfigured_and_configure_loads_it(
         client_node.destroy_node()
         rclpy.shutdown(context=context)
         kill_group(node)
-    assert node.returncode == 0 and "configured: engine ready" in output.text(timeout=10.0), output.text()
-    assert "Traceback" not in output.text(), output.text()
+    log = output.text(timeout=10.0)
+    assert node.returncode == 0 and "configured: engine ready" in log and "Traceback" not in log, log
+    assert "numba kernels: the cache" in log and "is complete" in log and "0 compiled" in log, log
+
+
+def _lifecycle_state(driver: Driver, namespace: str = "") -> str:
+    """The node's state from its ~/get_state service, asked from the driver's node."""
+    client = driver.node.create_client(GetState, f"{namespace}/align_node/get_state")
+    try:
+        assert client.wait_for_service(30.0), "no ~/get_state service"
+        future = client.call_async(GetState.Request())
+        assert wait_for(future.done, 30.0), "no answer from ~/get_state"
+        return future.result().current_state.label
+    finally:
+        driver.node.destroy_client(client)
+
+
+def test_lifecycle_true_autostart_true_brings_the_managed_node_up_to_active_from_the_launch_file(install_prefix):
+    domain = domain_id()
+    launch, output = start([*LAUNCH, "lifecycle:=true", "autostart:=true"], ros_environment(install_prefix, domain))
+    driver = None
+    try:
+        assert output.wait_for("active: subscribed", FIRST_TIMEOUT), output.text()
+        driver = Driver(domain)
+        assert _lifecycle_state(driver) == "active"
+        odometry = [driver.send(scan_msg(k)) for k in range(2)]
+        interrupt(launch)
+    finally:
+        if driver is not None:
+            driver.close()
+        kill_group(launch)
+    log = output.text(timeout=10.0)
+    assert "align_lifecycle_node" in next(line for line in log.splitlines() if "process started" in line), log
+    assert [o.header.stamp for o in odometry] == [stamp(k) for k in range(2)]
+    assert "configured: engine ready" in log and "Failed to make transition" not in log, log
+    assert launch.returncode == 0 and "Traceback" not in log, log
+
+
+def test_lifecycle_true_autostart_false_leaves_the_node_to_a_lifecycle_manager(install_prefix):
+    """What a manager (nav2_lifecycle_manager, ``ros2 lifecycle set``) finds: an unconfigured node that it drives."""
+    domain = domain_id()
+    launch, output = start([*LAUNCH, "lifecycle:=true", "autostart:=false"], ros_environment(install_prefix, domain))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    manager = rclpy.create_node("lifecycle_manager", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(manager)
+    try:
+        get = manager.create_client(GetState, "/align_node/get_state")
+        change = manager.create_client(ChangeState, "/align_node/change_state")
+        assert get.wait_for_service(60.0) and change.wait_for_service(10.0), output.text()
+
+        def call(client, request):
+            future = client.call_async(request)
+            executor.spin_until_future_complete(future, timeout_sec=FIRST_TIMEOUT)
+            assert future.done(), output.text()
+            return future.result()
+
+        assert call(get, GetState.Request()).current_state.label == "unconfigured"
+        for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
+            assert call(change, ChangeState.Request(transition=Transition(id=transition))).success, output.text()
+        assert call(get, GetState.Request()).current_state.label == "active"
+        interrupt(launch)
+    finally:
+        executor.shutdown()
+        manager.destroy_node()
+        rclpy.shutdown(context=context)
+        kill_group(launch)
+    log = output.text(timeout=10.0)
+    assert launch.returncode == 0 and "Traceback" not in log, log
 
 
 @pytest.mark.slow
@@ -282,48 +345,3 @@ def _flat(tree: dict, prefix: str = "") -> dict:
 def _plain(value):
     """A parameter value as YAML loads it (arrays come back as lists)."""
     return list(value) if isinstance(value, (tuple, np.ndarray)) or type(value).__name__ == "array" else value
-
-
-class Driver:
-    """The sensor driver's side: publishes raw PointCloud2 CDR on ``namespace``/points (with ``clock``, /clock at
-    each scan's stamp first, as a simulator or ``ros2 bag play --clock``), collects the node's odometry."""
-
-    def __init__(self, domain_id: int, namespace: str = "", clock: bool = False):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node("kitti_driver", context=self.context)
-        self.namespace = namespace
-        self.points = self.node.create_publisher(PointCloud2, f"{namespace}/points", 10)
-        self.clock = self.node.create_publisher(Clock, "/clock", 10) if clock else None
-        self.odometry: list = []
-        self.node.create_subscription(Odometry, f"{namespace}/align_node/odometry", self.odometry.append, 50)
-        self.publishers_seen = 0  # by the node, from its diagnostics: it has matched this publisher
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-        # Best effort (the node's default QoS) drops what is sent before both sides have matched each other.
-        assert wait_for(lambda: self.points.get_subscription_count() > 0 and self.publishers_seen > 0, 30.0), \
-            "align_node never subscribed"
-
-    def _on_diagnostics(self, msg) -> None:
-        for status in msg.status:
-            values = {kv.key: kv.value for kv in status.values}
-            if status.name.startswith(f"{self.namespace}/align_node") and values.get("input_publishers",
-                                                                                       "0").isdigit():
-                self.publishers_seen = max(self.publishers_seen, int(values["input_publishers"]))
-
-    def send(self, raw: bytes, stamp_ns: int = 0):
-        count = len(self.odometry)
-        if self.clock is not None:
-            self.clock.publish(Clock(clock=Time(sec=stamp_ns // 10 ** 9, nanosec=stamp_ns % 10 ** 9)))
-        self.points.publish(raw)
-        assert wait_for(lambda: len(self.odometry) > count, 120.0), "no odometry"
-        return self.odometry[-1]
-
-    def close(self):
-        self.executor.shutdown()
-        self.thread.join(10)
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)

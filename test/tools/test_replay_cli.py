@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,19 @@ from cemnet_ros.tools.replay_cli import load_params, main
 
 REPO = Path(__file__).resolve().parents[2]
 
+
+
+def test_replay_without_matplotlib_writes_everything_but_the_figure(tiny_bag, tmp_path, capsys, monkeypatch):
+    for name in ("matplotlib", "matplotlib.figure"):
+        monkeypatch.setitem(sys.modules, name, None)  # as on a headless robot without python3-matplotlib
+    out = tmp_path / "out"
+    assert main([str(tiny_bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "100",
+                 "--registration.cem.n_iters", "2"]) == 0
+    assert not (out / "replay.png").exists()
+    assert (out / "trajectory_tum.txt").is_file() and "plot" not in json.loads((out / "summary.json").read_text())[
+        "outputs"]
+    err = capsys.readouterr().err
+    assert "replay.png not written" in err and "python3-matplotlib" in err and "--no-plot" in err, err
 
 
 def test_replay_tiny_bag_small_cem(tiny_bag, tmp_path, capsys):

@@ -1,4 +1,5 @@
-"""cemnet-warm-kernels compiles what the node's first scans need: afterwards the node's path compiles nothing."""
+"""cemnet-warm-kernels compiles what the node's first scans need and marks the cache complete: afterwards the node's
+path compiles nothing, and a node starting there does not warm up again."""
 import os
 import subprocess
 import sys
@@ -15,7 +16,7 @@ from cemnet_ros.runtime.extrinsic import BaseFrame
 from cemnet_ros.runtime.odometry_output import aligned_points
 from cemnet_ros.replay.bag_io import BagReader
 from cemnet_ros.ros.node_config import NodeConfig
-from cemnet_ros.tools.warm_kernels import cache_counts
+from cemnet_ros.runtime.kernel_warmup import cache_counts
 import numpy as np
 
 session = AlignerSession(AlignerConfig(), NodeConfig(), BaseFrame(np.eye(4)))
@@ -35,6 +36,9 @@ def test_after_warming_the_nodes_first_scans_load_every_kernel_from_the_cache(tm
                           text=True, timeout=900)
     assert warm.returncode == 0, warm.stderr[-2000:]
     assert " 0 loaded from the cache" in warm.stdout and str(tmp_path / "cache") in warm.stdout
+    complete = subprocess.run([sys.executable, "-c", "from cemnet_ros.runtime.kernel_warmup import cache_complete; "
+                               "print(cache_complete())"], env=env, capture_output=True, text=True, timeout=300)
+    assert complete.stdout.split() == ["True"], complete.stderr[-2000:]
     node = subprocess.run([sys.executable, "-c", NODE_PATH, str(REPO / "bags" / "kitti_00_6scans.mcap")], env=env,
                           capture_output=True, text=True, timeout=900)
     assert node.returncode == 0, node.stderr[-2000:]
