@@ -9,15 +9,15 @@ The rules, in the order :func:`decide` applies them (the first that applies deci
 3. **Near-tie**: distinct answers within ``tie_ratio`` in consistency. The global search competes first; then the
    one next to the prediction is kept as a *near-tie* (flagged, the map does not take it in), and with none next
    to it the step is *ambiguous* (failed).
-4. **Degenerate**: the view leaves a direction unconstrained (conditioning below ``min_conditioning``): flagged,
-   the prediction kept along that direction.
-5. **Confirmed where expected**: the leader fits at ``confirm_ratio`` x the running level and the prediction
+4. **Confirmed where expected**: the leader fits at ``confirm_ratio`` x the running level and the prediction
    expects it (:attr:`~.evidence.Evidence.expected`: the prediction's polish reached it or it lies within the
    prediction's spread): it stands without further starts. Anything else waits for the global search, whose
    starts are independent of the prediction; after it an answer stands when it is confirmed, or when the
    prediction expects it and it still overlaps (rule 1). Without a running level (a first pair; a map restarted
    after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where no
    motion is known yet (a first pair), when the search found no near-tie.
+5. **Degenerate**: an answer that stands on that evidence but whose view leaves a direction unconstrained
+   (conditioning below ``min_conditioning``): flagged, the prediction kept along that direction.
 6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
    flat valley) waits for its rotational neighbours to compete (a near-tie then flags it, rule 3).
 7. Otherwise: *accepted*.
@@ -91,9 +91,6 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         if evidence.near:
             return Verdict(Outcome.NEAR_TIE, f"symmetric scene: {summary}, the one next to the motion prediction kept")
         return Verdict(Outcome.AMBIGUOUS, f"ambiguous: {summary}, none next to the motion prediction")
-    if leader.signals.conditioning < rules.min_conditioning:
-        return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
-                                           "prediction kept along the unconstrained direction")
     confirmed = level is not None and leader.fitness >= rules.confirm_ratio * level
     if not (confirmed and evidence.expected):
         why = (f"fitness {leader.fitness:.3f} < {rules.confirm_ratio:.2f} x its running level {level:.3f}"
@@ -104,6 +101,9 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         if not (confirmed or evidence.expected or (level is None and not expected.moving)):
             return Verdict(Outcome.FAILED, f"unconfirmed: {why}, {evidence.offset[0]:.2f} m / "
                                            f"{np.degrees(evidence.offset[1]):.1f} deg from the motion prediction")
+    if leader.signals.conditioning < rules.min_conditioning:
+        return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
+                                           "prediction kept along the unconstrained direction")
     if leader.signals.conditioning < rules.neighbour_conditioning and not evidence.neighbours_checked:
         return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)
     return Verdict(Outcome.ACCEPTED)

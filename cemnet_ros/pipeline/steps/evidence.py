@@ -7,8 +7,8 @@
 - its **support**: the kinds of start that reached it;
 - where it lies against the **expectation**: the prediction *expects* it when the prediction's own polish
   converged within reach of it, the prediction's start (fine or from afar) reached it, or it lies within
-  ``near`` of the prediction along the directions the scene constrains; and the running fitness **level** of the
-  vouched steps;
+  ``near`` of the prediction (in every direction: along a direction the view leaves free an answer lies anywhere,
+  so nearness there would be no claim); and the running fitness **level** of the vouched steps;
 - which starts have competed: the global **search** (independent of the prediction), the leader's rotational
   **neighbours** (its basin checked on a weakly constrained view).
 """
@@ -21,7 +21,6 @@ import numpy as np
 
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.answer import Answer, Origin, distinct
-from cemnet_ros.pipeline.steps.covariance import keep_prediction_along
 from cemnet_ros.pipeline.steps.health import disagreement
 
 
@@ -45,7 +44,7 @@ class Evidence:
     tied: tuple[Answer, ...]  # the distinct near-ties, the leader among them (empty: no near-tie)
     rival: Optional[Answer]  # the most consistent answer distinct from the leader
     support: frozenset[Origin]  # the kinds of start that reached the leader
-    offset: tuple[float, float]  # (m, rad) of the leader from the prediction along the constrained directions
+    offset: tuple[float, float]  # (m, rad) of the leader from the prediction
     searched: bool  # the global search's hypotheses have competed
     neighbours_checked: bool  # the leader's rotational neighbours have competed
     missing: str = ""
@@ -66,8 +65,9 @@ class Evidence:
             if answer.consistency >= best.consistency - margin and all(
                     distinct(answer.T_odom_sensor, kept.T_odom_sensor) for kept in tied):
                 tied.append(answer)
-        offsets = [offset_along_constrained(a, expectation.T_predicted, rules.min_conditioning) for a in tied]
-        nearest = int(np.argmin([metres for metres, _ in offsets]))
+        offsets = [disagreement(expectation.T_predicted, a.T_odom_sensor) for a in tied]
+        nearest = int(np.argmin([metres + a.conditioning.length * radians for a, (metres, radians)
+                                 in zip(tied, offsets)]))
         leader = tied[nearest]
         rival = next((a for a in ranked if distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)
         return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, support(leader),
@@ -75,7 +75,7 @@ class Evidence:
 
     @property
     def near(self) -> bool:
-        """The leader lies within ``near`` of the prediction along the constrained directions."""
+        """The leader lies within ``near`` of the prediction."""
         return self.offset[0] <= self.expectation.near[0] and self.offset[1] <= self.expectation.near[1]
 
     @property
@@ -90,10 +90,3 @@ class Evidence:
         if self.leader is None or self.rival is None:
             return np.inf
         return self.leader.consistency - self.rival.consistency
-
-
-def offset_along_constrained(answer: Answer, T_reference: np.ndarray, min_conditioning: float) -> tuple[float, float]:
-    """(metres, radians) of ``answer`` from ``T_reference`` along the directions its view constrains."""
-    free = answer.conditioning.degenerate_basis(min_conditioning)
-    return disagreement(T_reference, keep_prediction_along(free, answer.conditioning.length, T_reference,
-                                                           answer.T_odom_sensor))

@@ -28,7 +28,7 @@ from cemnet_ros.pipeline.steps.starts import Starts
 
 PREDICTION_SPREADS = 3.0  # an answer within this many tracking spreads of the prediction is the prediction's
 LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
-EARLY = (Outcome.ACCEPTED, Outcome.DEGENERATE, Outcome.NEAR_TIE, Outcome.AMBIGUOUS)  # end the plan before its end
+EARLY = (Outcome.ACCEPTED, Outcome.DEGENERATE)  # end the plan before its end: more starts only add rivals
 
 
 @dataclass(frozen=True)
