@@ -36,8 +36,8 @@ class Landscape:
         self.basins, self.conditioning = list(basins), conditioning
         self.config, self.effort, self.iters, self.reach = AlignerConfig(), 1.0, ITERS, REACH
         self.reach_rad = REACH / LENGTH
-        self.frame = SimpleNamespace(polish=None, polish_voxel=1.0, length=LENGTH)
-        self.map = SimpleNamespace(overlap=lambda points, T, *limits: self.overlap(T))
+        self.frame = SimpleNamespace(polish=np.zeros((10, 3)), polish_voxel=1.0, length=LENGTH)
+        self.map = SimpleNamespace(overlap=lambda points, T, *limits: self.overlap(T), free_space=None)
 
     def _nearest(self, T: np.ndarray, radius: float):
         def apart(b: Basin) -> float:

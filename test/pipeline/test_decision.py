@@ -29,10 +29,11 @@ def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, condit
 
 
 def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", moving=True,
-             missing="") -> Evidence:
+             missing="", seen_through=0.0) -> Evidence:
     expectation = Expectation(at(0.0), NEAR, level, because, moving)
-    return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}), searched=searched,
-                       neighbours_checked=neighbours, missing=missing)
+    return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}),
+                       seen_through=lambda a: seen_through, searched=searched, neighbours_checked=neighbours,
+                       missing=missing)
 
 
 def test_no_answer_or_no_overlap_fails():
@@ -124,3 +125,17 @@ def test_answers_closer_than_the_vouched_precision_are_one_and_coverage_ranks_th
 def test_nearness_is_measured_in_every_direction_even_one_the_view_leaves_free():
     corridor = answer(x=3.0, conditioning=1e-6)
     assert evidence(corridor).offset[0] == pytest.approx(3.0) and not evidence(corridor).near
+
+
+def test_an_answer_standing_only_after_the_search_must_not_contradict_what_the_map_saw_empty():
+    far = RULES.max_free_space + 0.01
+    assert decide(evidence(answer(x=3.0), searched=True, seen_through=far), RULES).outcome == Outcome.FAILED
+    assert decide(evidence(answer(x=3.0), searched=True, seen_through=far / 2), RULES).outcome == Outcome.ACCEPTED
+    # confirmed where the prediction expects it: the running level and the prediction vouch, it is not measured
+    assert decide(evidence(answer(explained=True), seen_through=1.0), RULES).outcome == Outcome.ACCEPTED
+
+
+def test_without_a_level_more_of_the_scan_off_the_map_than_on_its_surfaces_fails():
+    sparse = answer(fitness=0.3, coverage=0.6)  # consistency -0.1
+    verdict = decide(evidence(sparse, level=None, moving=False, searched=True), RULES)
+    assert verdict.outcome == Outcome.FAILED and "off the map (0.400)" in verdict.reason

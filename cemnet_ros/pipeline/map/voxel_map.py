@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
+from cemnet_ros.pipeline.map.free_space import FreeSpace
 from cemnet_ros.pipeline.map.gicp_cloud import GICP_VOXELS, GicpCloud, gicp_cloud
 from cemnet_ros.pipeline.map.voxel_hash import EMPTY, insert_points, prune_far_voxels, rehash
 from cemnet_ros.pipeline.map.voxel_normals import NORMAL_RADIUS, estimate_normals
@@ -52,6 +53,7 @@ class VoxelMap:
         self._dense: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = None
         self._last_scan: Optional[GicpCloud] = None
         self._make_last_scan: Optional[Callable[[], GicpCloud]] = None
+        self._free_space: Optional[FreeSpace] = None
 
     @property
     def gicp_voxel(self) -> float:
@@ -70,6 +72,14 @@ class VoxelMap:
         if self._last_scan is None and self._make_last_scan is not None:
             self._last_scan = self._make_last_scan()
         return self._last_scan
+
+    @property
+    def free_space(self) -> Optional[FreeSpace]:
+        """What the last scan inserted saw as empty (:mod:`.free_space`, from its thinned points); None when empty."""
+        last = self.last_scan
+        if self._free_space is None and last is not None:
+            self._free_space = FreeSpace(np.asarray(last.points.points())[:, :3], last.pose)
+        return self._free_space
 
     @property
     def points(self) -> np.ndarray:
@@ -120,6 +130,7 @@ class VoxelMap:
         self._n_points = int(self._counts[:self._n_voxels].sum())
         self._dense = None
         self._last_scan = None
+        self._free_space = None
         self._make_last_scan = scan or (lambda: gicp_cloud(points, self.gicp_voxel))
 
     def nearest(self, query: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,9 @@ polish whose basin stage lands on an answer already there is not polished again;
 an answer are its *support* (the prediction among them: the prediction's basin holds it). The contest also keeps the
 prediction the answers are judged near (recentred when the prediction left the map and the global search ran
 around where the map last grew instead), why a start found no map to register against, and which kinds of
-independent start have competed (:class:`~.evidence.Evidence`).
+independent start have competed (:class:`~.evidence.Evidence`), and measures on demand how much of the scan an
+answer puts where the map's last scan saw empty space (:mod:`~cemnet_ros.pipeline.map.free_space`; on
+``FREE_SPACE_POINTS`` of the polish points: the share, not every point, is the evidence).
 """
 from __future__ import annotations
 
@@ -13,10 +15,13 @@ from typing import Optional
 
 import numpy as np
 
+from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.answer import Answer, Origin, distinct, measured
 from cemnet_ros.pipeline.steps.evidence import Evidence, Expectation
 from cemnet_ros.pipeline.steps.polish import Polisher
+
+FREE_SPACE_POINTS = 1000
 
 
 class Contest:
@@ -31,6 +36,7 @@ class Contest:
         self.searched = False  # the global search's hypotheses have competed
         self.neighbours_checked = False  # the leader's rotational neighbours have competed
         self.missing = ""  # why a start had no map to register against (the step's reason when none had)
+        self._seen_through: dict[int, float] = {}
 
     def enter(self, T_start: np.ndarray, origin: Origin, *, wide: bool = False, spread_m: float = 0.0
               ) -> Optional[Answer]:
@@ -56,6 +62,15 @@ class Contest:
         """The kinds of start that reached ``answer``."""
         return frozenset(origin for origin, T in self._arrivals if not distinct(T, answer.T_odom_sensor))
 
+    def seen_through(self, answer: Answer) -> float:
+        """The share of the scan ``answer`` puts in the free space of the map's last scan (0 without one)."""
+        if id(answer) not in self._seen_through:
+            free_space = self.polisher.map.free_space
+            points = self.polisher.frame.polish[:FREE_SPACE_POINTS]
+            self._seen_through[id(answer)] = 0.0 if free_space is None else free_space.seen_through(
+                apply_transform(answer.T_odom_sensor, points))
+        return self._seen_through[id(answer)]
+
     def recentre(self, T_guess: np.ndarray) -> None:
         """Judge the answers around ``T_guess`` instead of the prediction (which left the map; only before any
         answer was entered, so that every answer is judged against the same guess)."""
@@ -66,5 +81,5 @@ class Contest:
                  search_because: str = "", moving: bool = True) -> Evidence:
         """The record the decision reads (:class:`~.evidence.Evidence`)."""
         expectation = Expectation(self.T_predicted, near, level, search_because, moving)
-        return Evidence.of(self.answers, expectation, rules, support=self.support, searched=self.searched,
-                           neighbours_checked=self.neighbours_checked, missing=self.missing)
+        return Evidence.of(self.answers, expectation, rules, support=self.support, seen_through=self.seen_through,
+                           searched=self.searched, neighbours_checked=self.neighbours_checked, missing=self.missing)

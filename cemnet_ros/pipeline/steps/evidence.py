@@ -10,11 +10,15 @@
   ``near`` of the prediction (in every direction: along a direction the view leaves free an answer lies anywhere,
   so nearness there would be no claim); and the running fitness **level** of the vouched steps;
 - which starts have competed: the global **search** (independent of the prediction), the leader's rotational
-  **neighbours** (its basin checked on a weakly constrained view).
+  **neighbours** (its basin checked on a weakly constrained view);
+- on demand, the share of the scan the leader puts **where the map's last scan saw empty space**
+  (:mod:`~cemnet_ros.pipeline.map.free_space`; measured once, when first read: it costs a few milliseconds the
+  cheap steps need not pay).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -47,16 +51,18 @@ class Evidence:
     offset: tuple[float, float]  # (m, rad) of the leader from the prediction
     searched: bool  # the global search's hypotheses have competed
     neighbours_checked: bool  # the leader's rotational neighbours have competed
+    measure_seen_through: Callable[[Answer], float]  # an answer's share of the scan in the map's free space
     missing: str = ""
 
     @classmethod
     def of(cls, answers: Sequence[Answer], expectation: Expectation, rules: HealthConfig, *,
-           support: Callable[[Answer], frozenset[Origin]], searched: bool, neighbours_checked: bool,
-           missing: str = "") -> "Evidence":
-        """The record of ``answers`` (see the module); ``support``: the kinds of start that reached an answer."""
+           support: Callable[[Answer], frozenset[Origin]], seen_through: Callable[[Answer], float],
+           searched: bool, neighbours_checked: bool, missing: str = "") -> "Evidence":
+        """The record of ``answers`` (see the module); ``support``: the kinds of start that reached an answer,
+        ``seen_through``: the share of the scan an answer puts in the map's free space."""
         if not answers:
             return cls(expectation, None, (), None, frozenset(), (np.inf, np.inf), searched, neighbours_checked,
-                       missing)
+                       seen_through, missing)
         ranked = sorted(answers, key=lambda a: -a.consistency)
         best = ranked[0]
         margin = (1.0 - rules.tie_ratio) * best.fitness
@@ -71,7 +77,7 @@ class Evidence:
         leader = tied[nearest]
         rival = next((a for a in ranked if distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)
         return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, support(leader),
-                   offsets[nearest], searched, neighbours_checked, missing)
+                   offsets[nearest], searched, neighbours_checked, seen_through, missing)
 
     @property
     def near(self) -> bool:
@@ -83,6 +89,12 @@ class Evidence:
         """The prediction expects the leader (see the module)."""
         assert self.leader is not None
         return self.leader.explained or Origin.PREDICTION in self.support or self.near
+
+    @cached_property
+    def seen_through(self) -> float:
+        """The share of the scan the leader puts where the map's last scan saw empty space."""
+        assert self.leader is not None
+        return self.measure_seen_through(self.leader)
 
     @property
     def margin(self) -> float:

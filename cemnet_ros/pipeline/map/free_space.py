@@ -1,0 +1,54 @@
+"""What a scan saw as empty: the space between its sensor and the points it hit.
+
+A pose that puts another scan's points in that space contradicts the scan: its sensor looked through where they
+would be. The fitness (the share of points on the map's surfaces) cannot tell a wrong answer from a right one
+where the right one overlaps the map little (sparse keyframes, far pairs) and the wrong one fits the ground and
+a few walls (a car that "did not move" on a road whose ground rings fit at any stop): the free space can, because
+the wrong answer puts what the scan saw ahead inside what the map's scan saw through.
+
+A point is in the free space when every ray of the scan within the scan's own angular spacing (twice the median
+angle between neighbouring rays: a sparse keyframe's rays are wider than a dense sweep's) hit farther than the
+point by ``margin`` m plus ``relative_margin`` of that range (range noise, beam width, the reference's error). A
+direction no ray saw is unknown, not free.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+MIN_RANGE_M = 0.5  # points this close to a sensor carry no direction worth the name
+RAYS = 8  # rays compared within the angular spacing
+MARGIN_M, RELATIVE_MARGIN = 1.0, 0.05  # in front of a hit by more than this is through it
+
+
+class FreeSpace:
+    """The rays of one scan: ``points`` (n, 3) in its sensor frame, which sits at ``T_odom_sensor``."""
+
+    def __init__(self, points: np.ndarray, T_odom_sensor: Optional[np.ndarray] = None) -> None:
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        ranges = np.linalg.norm(points, axis=1)
+        kept = ranges > MIN_RANGE_M
+        self.ranges = ranges[kept]
+        self.T_sensor_odom = np.linalg.inv(np.eye(4) if T_odom_sensor is None else T_odom_sensor)
+        self._tree = cKDTree(points[kept] / self.ranges[:, None]) if len(self.ranges) >= 2 else None
+        if self._tree is None:
+            self.spacing = 0.0
+            return
+        neighbour, _ = self._tree.query(self._tree.data, k=2)
+        self.spacing = 2.0 * float(np.median(neighbour[:, 1]))
+
+    def seen_through(self, points_odom: np.ndarray) -> float:
+        """The share of ``points_odom`` (n, 3) that lie in this scan's free space (0 for none)."""
+        points_odom = np.asarray(points_odom, dtype=np.float64).reshape(-1, 3)
+        if self._tree is None or not len(points_odom):
+            return 0.0
+        local = points_odom @ self.T_sensor_odom[:3, :3].T + self.T_sensor_odom[:3, 3]
+        ranges = np.linalg.norm(local, axis=1)
+        kept = ranges > MIN_RANGE_M
+        chord, index = self._tree.query(local[kept] / ranges[kept, None], k=RAYS, distance_upper_bound=self.spacing)
+        hit = np.where(np.isfinite(chord), self.ranges[np.minimum(index, len(self.ranges) - 1)], np.inf)
+        nearest_hit = hit.min(axis=1)
+        through = np.isfinite(nearest_hit) & (ranges[kept] < nearest_hit * (1.0 - RELATIVE_MARGIN) - MARGIN_M)
+        return float(np.count_nonzero(through)) / len(points_odom)
