@@ -233,20 +233,20 @@ class ScanAligner:
                       f"lost for {self.config.recovery.restart_after} scans: the map restarts from this scan"], True
 
     def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, registered: Registered) -> None:
-        """A step that is not failed: the map, the fitness level and the prediction errors take in a vouched
-        (or degenerate) one; a near-tie moves the pose only (a map grown at a guess would mislead every later
-        scan)."""
+        """A step that is not failed: the fitness level takes it in; the map and the prediction errors a vouched
+        (or degenerate) one, not a near-tie, which moves the pose only (a map grown at a guess would mislead every
+        later scan)."""
         assert self._map is not None  # a step is only committed against the map it was registered on
         self._pending_recovery = ""
         self._failures_in_a_row = 0
         self._lost.reset()
+        leader = registered.evidence.leader
+        assert leader is not None  # a step that is not failed has an answer
+        self._level.accept(leader.fitness)  # near-ties too: equals fit alike, and that is what this scene gives
         if registered.verdict.outcome == Outcome.NEAR_TIE:
             return
         if not registered.searched:  # a search's guess was no prediction of the motion model
             self._spread.update(np.linalg.inv(T_predicted) @ pose)
-        leader = registered.evidence.leader
-        assert leader is not None  # a step that is not failed has an answer
-        self._level.accept(leader.fitness)
         self._map.update(apply_transform(pose, frame.dense), pose[:3, 3],
                          self._scan_cloud(frame, self._map.gicp_voxel, pose))
         self._T_odom_last_insert = pose.copy()

@@ -24,15 +24,16 @@ MARGIN_M, RELATIVE_MARGIN = 1.0, 0.05  # in front of a hit by more than this is 
 
 
 class FreeSpace:
-    """The rays of one scan: ``points`` (n, 3) in its sensor frame, which sits at ``T_odom_sensor``."""
+    """The rays of one scan: its ``points`` (n, 3, odom frame, as the map took them in: the voxel grid, not a
+    thinner cloud, whose centroids would stand in front of the rays they replace) from ``sensor`` (3,) in odom."""
 
-    def __init__(self, points: np.ndarray, T_odom_sensor: Optional[np.ndarray] = None) -> None:
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        ranges = np.linalg.norm(points, axis=1)
+    def __init__(self, points: np.ndarray, sensor: Optional[np.ndarray] = None) -> None:
+        self.sensor = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64).reshape(3)
+        rays = np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.sensor
+        ranges = np.linalg.norm(rays, axis=1)
         kept = ranges > MIN_RANGE_M
         self.ranges = ranges[kept]
-        self.T_sensor_odom = np.linalg.inv(np.eye(4) if T_odom_sensor is None else T_odom_sensor)
-        self._tree = cKDTree(points[kept] / self.ranges[:, None]) if len(self.ranges) >= 2 else None
+        self._tree = cKDTree(rays[kept] / self.ranges[:, None]) if len(self.ranges) >= 2 else None
         if self._tree is None:
             self.spacing = 0.0
             return
@@ -44,7 +45,7 @@ class FreeSpace:
         points_odom = np.asarray(points_odom, dtype=np.float64).reshape(-1, 3)
         if self._tree is None or not len(points_odom):
             return 0.0
-        local = points_odom @ self.T_sensor_odom[:3, :3].T + self.T_sensor_odom[:3, 3]
+        local = points_odom - self.sensor
         ranges = np.linalg.norm(local, axis=1)
         kept = ranges > MIN_RANGE_M
         chord, index = self._tree.query(local[kept] / ranges[kept, None], k=RAYS, distance_upper_bound=self.spacing)

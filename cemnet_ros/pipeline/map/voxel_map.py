@@ -54,6 +54,7 @@ class VoxelMap:
         self._last_scan: Optional[GicpCloud] = None
         self._make_last_scan: Optional[Callable[[], GicpCloud]] = None
         self._free_space: Optional[FreeSpace] = None
+        self._last_points: Optional[tuple[np.ndarray, np.ndarray]] = None  # (points, sensor position), odom
 
     @property
     def gicp_voxel(self) -> float:
@@ -75,10 +76,10 @@ class VoxelMap:
 
     @property
     def free_space(self) -> Optional[FreeSpace]:
-        """What the last scan inserted saw as empty (:mod:`.free_space`, from its thinned points); None when empty."""
-        last = self.last_scan
-        if self._free_space is None and last is not None:
-            self._free_space = FreeSpace(np.asarray(last.points.points())[:, :3], last.pose)
+        """What the last scan inserted saw as empty (:mod:`.free_space`, made when first asked for); None when
+        empty."""
+        if self._free_space is None and self._last_points is not None:
+            self._free_space = FreeSpace(*self._last_points)
         return self._free_space
 
     @property
@@ -131,6 +132,7 @@ class VoxelMap:
         self._dense = None
         self._last_scan = None
         self._free_space = None
+        self._last_points = (points, sensor)
         self._make_last_scan = scan or (lambda: gicp_cloud(points, self.gicp_voxel))
 
     def nearest(self, query: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray]:

@@ -2,7 +2,9 @@
 
 - the **leader**: the most consistent answer; among distinct answers whose consistency falls short of the best
   one's by less than ``(1 - health.tie_ratio)`` x its fitness (a *near-tie*: the scene cannot settle them) the one
-  nearest the prediction, so that a distant answer never replaces a near one of similar consistency;
+  nearest the prediction, so that a distant answer never replaces a near one of similar consistency. Answers that
+  differ only along a direction the best one's view leaves free (a corridor's axis) are no near-tie: that is the
+  view's degeneracy, which the decision handles as such;
 - its **rival**: the most consistent answer distinct from it, and the **margin** it leads by;
 - its **support**: the kinds of start that reached it;
 - where it lies against the **expectation**: the prediction *expects* it when the prediction's own polish
@@ -25,6 +27,7 @@ import numpy as np
 
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.answer import Answer, Origin, distinct
+from cemnet_ros.pipeline.steps.covariance import keep_prediction_along
 from cemnet_ros.pipeline.steps.health import disagreement
 
 
@@ -67,9 +70,12 @@ class Evidence:
         best = ranked[0]
         margin = (1.0 - rules.tie_ratio) * best.fitness
         tied = [best]
+        free = best.conditioning.degenerate_basis(rules.min_conditioning)
         for answer in ranked[1:]:
+            T_constrained = keep_prediction_along(free, best.conditioning.length, best.T_odom_sensor,
+                                                  answer.T_odom_sensor)  # its offset along free directions dropped
             if answer.consistency >= best.consistency - margin and all(
-                    distinct(answer.T_odom_sensor, kept.T_odom_sensor) for kept in tied):
+                    distinct(T_constrained, kept.T_odom_sensor) for kept in tied):
                 tied.append(answer)
         offsets = [disagreement(expectation.T_predicted, a.T_odom_sensor) for a in tied]
         nearest = int(np.argmin([metres + a.conditioning.length * radians for a, (metres, radians)
