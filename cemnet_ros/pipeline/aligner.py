@@ -187,14 +187,13 @@ class ScanAligner:
     def _commit(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, registered: Registered,
                 start: float) -> AlignmentStep:
         """Apply the outcome (see the module): a failed step publishes the prediction, the others their answer."""
-        verdict, previous = registered.verdict, self._pose
-        failed = verdict.failed or registered.T_odom_sensor is None
-        covariance = self._covariance(registered, T_predicted if failed else registered.T_odom_sensor)
-        restarted = False
-        if failed:
+        verdict, previous, answered = registered.verdict, self._pose, registered.T_odom_sensor
+        if verdict.failed or answered is None:
+            covariance = self._covariance(registered, T_predicted)
             pose, reasons, restarted = self._failed(frame, stamp_ns, T_predicted, registered)
         else:
-            pose, reasons = registered.T_odom_sensor, [verdict.reason] if verdict.reason else []
+            covariance = self._covariance(registered, answered)
+            pose, reasons, restarted = answered, [verdict.reason] if verdict.reason else [], False
             self._extend(frame, pose, T_predicted, registered)
         self._pose = pose
         self._motion.update(pose, stamp_ns)
