@@ -171,8 +171,8 @@ def test_large_motion_end_to_end():
     data = json.loads(report.to_json())
     assert data["meta"]["seeds"]["large_motion"] == 0 and data["meta"]["sizes"]["pairs"] == 2
     methods = data["sets"]["large_motion"]
-    expected = ["cemnet"] + [name for name, module in (("kiss-icp", "kiss_icp"), ("gicp", "small_gicp"))
-                             if importlib.util.find_spec(module) is not None]
+    peers = (("kiss-icp", "kiss_icp"), ("genz-icp", "genz_icp"), ("gicp", "small_gicp"))
+    expected = ["cemnet"] + [name for name, module in peers if importlib.util.find_spec(module) is not None]
     assert sorted(methods) == sorted(expected)
     for res in methods.values():
         assert len(res["steps"]) == 2
