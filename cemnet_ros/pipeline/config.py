@@ -84,9 +84,9 @@ class HealthConfig:
                                  "prediction it must, after the search too", low=0.0, high=1.0)
     coverage_distance: float = param(6.0, "a scan point is covered by the map when a map point lies this close "
                                      "(frame voxels)", low=0.1)
-    max_free_space: float = param(0.05, "an answer that stands only after the global search fails when more than this "
-                                  "share of the scan lies where the map's last scan saw empty space (its sensor "
-                                  "looked through it)", low=0.0, high=1.0)
+    max_seen_through: float = param(0.2, "an answer that puts more of the scan where the map's last scan saw empty "
+                                    "space (its sensor looked through it) than this x its fitness does not compete",
+                                    low=0.0)
     tie_ratio: float = param(0.95, "distinct answers whose consistency falls short of the best one's by less than "
                              "1 - this of its fitness are a near-tie: the one next to the prediction is kept, "
                              "flagged; with none next to it the step fails as ambiguous", low=0.01, high=1.0)

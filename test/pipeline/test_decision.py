@@ -29,10 +29,10 @@ def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, condit
 
 
 def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", moving=True,
-             missing="", seen_through=0.0) -> Evidence:
+             missing="", seen_through=lambda answer: 0.0) -> Evidence:
     expectation = Expectation(at(0.0), NEAR, level, because, moving)
     return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}),
-                       seen_through=lambda a: seen_through, searched=searched, neighbours_checked=neighbours,
+                       seen_through=seen_through, searched=searched, neighbours_checked=neighbours,
                        missing=missing)
 
 
@@ -127,12 +127,19 @@ def test_nearness_is_measured_in_every_direction_even_one_the_view_leaves_free()
     assert evidence(corridor).offset[0] == pytest.approx(3.0) and not evidence(corridor).near
 
 
-def test_an_answer_standing_only_after_the_search_must_not_contradict_what_the_map_saw_empty():
-    far = RULES.max_free_space + 0.01
-    assert decide(evidence(answer(x=3.0), searched=True, seen_through=far), RULES).outcome == Outcome.FAILED
-    assert decide(evidence(answer(x=3.0), searched=True, seen_through=far / 2), RULES).outcome == Outcome.ACCEPTED
-    # confirmed where the prediction expects it: the running level and the prediction vouch, it is not measured
-    assert decide(evidence(answer(explained=True), seen_through=1.0), RULES).outcome == Outcome.ACCEPTED
+def test_an_answer_that_contradicts_what_the_map_saw_empty_does_not_compete():
+    through = RULES.max_seen_through * LEVEL + 0.01  # more than the share on the map's surfaces allows
+    wrong, right = answer(x=0.1, fitness=LEVEL, coverage=1.0, explained=True), answer(x=3.0, fitness=LEVEL,
+                                                                                      coverage=0.99)
+    record = evidence(wrong, right, searched=True, seen_through=lambda a: through if a is wrong else 0.0)
+    assert record.leader is right and record.contradicted == (wrong,)
+    assert decide(record, RULES).outcome == Outcome.ACCEPTED
+    # even where the prediction expects it and the level confirms it: what the map saw empty outweighs both
+    alone = evidence(answer(explained=True), seen_through=lambda a: through)
+    verdict = decide(alone, RULES)
+    assert alone.leader is None and verdict.outcome == Outcome.FAILED and "empty space" in verdict.reason
+    assert decide(evidence(answer(explained=True), seen_through=lambda a: through / 2), RULES).outcome == \
+        Outcome.ACCEPTED
 
 
 def test_without_a_level_more_of_the_scan_off_the_map_than_on_its_surfaces_fails():

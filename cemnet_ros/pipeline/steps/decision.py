@@ -1,7 +1,8 @@
 """The decision: can the node vouch for this scan's leading answer? One function over one record of evidence.
 
 The rules, in the order :func:`decide` applies them (the first that applies decides; the thresholds are
-``health.*`` parameters, docs/node.md says what each one's figures were measured on):
+``health.*`` parameters, docs/node.md says what each one's figures were measured on). Answers that contradict what
+the map's last scan saw empty have not competed (:mod:`.evidence`).
 
 1. **No answer, or no overlap**: no map near the guess, too few point-to-plane pairs, a fitness below
    ``min_fitness`` or below ``fitness_drop`` x the running level: *failed* (the prediction is published).
@@ -16,10 +17,7 @@ The rules, in the order :func:`decide` applies them (the first that applies deci
    prediction expects it and it still overlaps (rule 1). Without a running level (a first pair; a map restarted
    after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where no
    motion is known yet (a first pair), when the search found no near-tie; and then at least as much of the scan
-   must lie on the map's surfaces as off the map (consistency >= 0). An answer that stands after the search must
-   also not put more than ``max_free_space`` of the scan where the map's last scan saw empty space
-   (:mod:`~cemnet_ros.pipeline.map.free_space`): a wrong pose that fits the ground and a few walls puts what the
-   scan saw ahead inside what the map's scan saw through.
+   must lie on the map's surfaces as off the map (consistency >= 0).
 5. **Degenerate**: an answer that stands on that evidence but whose view leaves a direction unconstrained
    (conditioning below ``min_conditioning``): flagged, the prediction kept along that direction.
 6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
@@ -108,9 +106,6 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         if level is None and leader.consistency < 0.0:
             return Verdict(Outcome.FAILED, f"unconfirmed: {why}, more of the scan off the map "
                                            f"({1 - leader.coverage:.3f}) than on its surfaces ({leader.fitness:.3f})")
-        if evidence.seen_through > rules.max_free_space:
-            return Verdict(Outcome.FAILED, f"{evidence.seen_through:.3f} of the scan where the map's last scan saw "
-                                           f"empty space (> {rules.max_free_space:.3f})")
     if leader.signals.conditioning < rules.min_conditioning:
         return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
                                            "prediction kept along the unconstrained direction")

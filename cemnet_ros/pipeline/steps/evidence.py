@@ -13,14 +13,16 @@
   so nearness there would be no claim); and the running fitness **level** of the vouched steps;
 - which starts have competed: the global **search** (independent of the prediction), the leader's rotational
   **neighbours** (its basin checked on a weakly constrained view);
-- on demand, the share of the scan the leader puts **where the map's last scan saw empty space**
-  (:mod:`~cemnet_ros.pipeline.map.free_space`; measured once, when first read: it costs a few milliseconds the
-  cheap steps need not pay).
+- which answers the map's last scan **saw through**: an answer that puts more of the scan where that scan saw
+  empty space (:mod:`~cemnet_ros.pipeline.map.free_space`) than ``health.max_seen_through`` x its fitness (the
+  share it puts on the map's surfaces) contradicts what the map saw more than it agrees with it, and does not
+  compete (measured most consistent first, until one passes, and for its near-ties: a few milliseconds a scan). A wrong pose that fits the ground and a few walls (a car that "did not move" on a road)
+  puts what the scan saw ahead inside what the map's scan saw through; fitness and coverage cannot tell it from
+  the right one where the two views overlap little.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -54,7 +56,7 @@ class Evidence:
     offset: tuple[float, float]  # (m, rad) of the leader from the prediction
     searched: bool  # the global search's hypotheses have competed
     neighbours_checked: bool  # the leader's rotational neighbours have competed
-    measure_seen_through: Callable[[Answer], float]  # an answer's share of the scan in the map's free space
+    contradicted: tuple[Answer, ...] = ()  # answers dropped: the map's last scan saw through them
     missing: str = ""
 
     @classmethod
@@ -62,11 +64,22 @@ class Evidence:
            support: Callable[[Answer], frozenset[Origin]], seen_through: Callable[[Answer], float],
            searched: bool, neighbours_checked: bool, missing: str = "") -> "Evidence":
         """The record of ``answers`` (see the module); ``support``: the kinds of start that reached an answer,
-        ``seen_through``: the share of the scan an answer puts in the map's free space."""
-        if not answers:
-            return cls(expectation, None, (), None, frozenset(), (np.inf, np.inf), searched, neighbours_checked,
-                       seen_through, missing)
+        ``seen_through``: the share of the scan an answer puts in the free space of the map's last scan."""
+        def contradicts(answer: Answer) -> bool:
+            return seen_through(answer) > rules.max_seen_through * answer.fitness
+
         ranked = sorted(answers, key=lambda a: -a.consistency)
+        contradicted: list[Answer] = []
+        while ranked and contradicts(ranked[0]):
+            contradicted.append(ranked.pop(0))
+        if not ranked:
+            if contradicted:
+                first = contradicted[0]
+                missing = (f"every answer puts more of the scan where the map's last scan saw empty space than "
+                           f"{rules.max_seen_through:.2f} x its fitness (the most consistent: "
+                           f"{seen_through(first):.3f} against fitness {first.fitness:.3f})")
+            return cls(expectation, None, (), None, frozenset(), (np.inf, np.inf), searched, neighbours_checked,
+                       tuple(contradicted), missing)
         best = ranked[0]
         margin = (1.0 - rules.tie_ratio) * best.fitness
         tied = [best]
@@ -76,14 +89,17 @@ class Evidence:
                                                   answer.T_odom_sensor)  # its offset along free directions dropped
             if answer.consistency >= best.consistency - margin and all(
                     distinct(T_constrained, kept.T_odom_sensor) for kept in tied):
-                tied.append(answer)
+                if contradicts(answer):
+                    contradicted.append(answer)
+                else:
+                    tied.append(answer)
         offsets = [disagreement(expectation.T_predicted, a.T_odom_sensor) for a in tied]
         nearest = int(np.argmin([metres + a.conditioning.length * radians for a, (metres, radians)
                                  in zip(tied, offsets)]))
         leader = tied[nearest]
         rival = next((a for a in ranked if distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)
         return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, support(leader),
-                   offsets[nearest], searched, neighbours_checked, seen_through, missing)
+                   offsets[nearest], searched, neighbours_checked, tuple(contradicted), missing)
 
     @property
     def near(self) -> bool:
@@ -95,12 +111,6 @@ class Evidence:
         """The prediction expects the leader (see the module)."""
         assert self.leader is not None
         return self.leader.explained or Origin.PREDICTION in self.support or self.near
-
-    @cached_property
-    def seen_through(self) -> float:
-        """The share of the scan the leader puts where the map's last scan saw empty space."""
-        assert self.leader is not None
-        return self.measure_seen_through(self.leader)
 
     @property
     def margin(self) -> float:
