@@ -13,13 +13,15 @@ from typing import Any, Callable, Iterable, Mapping, Optional
 
 
 def param(default: Any, help: str, *, low: Optional[float] = None, high: Optional[float] = None,
-          choices: Optional[tuple] = None, dynamic: bool = False) -> Any:
+          choices: Optional[tuple] = None, dynamic: bool = False, user: bool = False) -> Any:
     """A documented config field: ``low``/``high`` bound numbers, both inclusive (each number of a tuple),
     ``choices`` strings. :func:`validate` enforces them on construction, :meth:`Parameter.check` on overrides.
     ``dynamic``: the node reads it when it is used, so it may change at runtime (``ros2 param set``); the others
-    are read once at start-up."""
+    are read once at start-up. ``user``: the tier a ROS user sets on a robot (topics, frames, range, device),
+    shown first: the shipped params file holds these alone; the others are expert settings, declared and settable
+    the same way."""
     return field(default=default, metadata={"help": help, "low": low, "high": high, "choices": choices,
-                                            "dynamic": dynamic})
+                                            "dynamic": dynamic, "user": user})
 
 
 def section(factory: Callable[[], Any], help: str) -> Any:
@@ -38,6 +40,7 @@ class Parameter:
     high: Optional[float] = None
     choices: Optional[tuple] = None
     dynamic: bool = False  # settable at runtime (ros2 param set); else read once at start-up
+    user: bool = False  # the user tier (the shipped params file, the docs' first table); else an expert setting
 
     @property
     def kind(self) -> type:
@@ -123,7 +126,8 @@ def parameters(config: Any, exclude: Iterable[str] = (), prefix: str = "") -> di
             out.update(parameters(value, excluded, name + "."))
         else:
             out[name] = Parameter(name, value, f.metadata["help"], f.metadata.get("low"), f.metadata.get("high"),
-                                  f.metadata.get("choices"), f.metadata.get("dynamic", False))
+                                  f.metadata.get("choices"), f.metadata.get("dynamic", False),
+                                  f.metadata.get("user", False))
     return out
 
 

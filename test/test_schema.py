@@ -61,7 +61,7 @@ def test_flags_are_built_from_the_schema():
         parser.parse_args(["--tracking.centre", "magic"])
 
 
-def test_shipped_params_file_and_docs_table_are_generated_from_the_schema():
+def test_shipped_params_file_and_docs_tables_are_generated_from_the_schema():
     from pathlib import Path
 
     from cemnet_ros.ros.node_config import parameters_markdown
@@ -70,7 +70,48 @@ def test_shipped_params_file_and_docs_table_are_generated_from_the_schema():
     assert (repo / "config" / "align_node.yaml").read_text() == params_file_text(), \
         "regenerate: python -m cemnet_ros.ros.node_config > config/align_node.yaml"
     assert parameters_markdown() in (repo / "docs" / "node.md").read_text(), \
-        "regenerate the table in docs/node.md: python -m cemnet_ros.ros.node_config --markdown"
+        "regenerate the tables in docs/node.md: python -m cemnet_ros.ros.node_config --markdown"
+
+
+def test_shipped_params_file_holds_the_user_tier_alone_in_at_most_60_lines():
+    from pathlib import Path
+
+    from cemnet_ros.ros.node_config import user_parameters
+
+    text = (Path(__file__).resolve().parents[1] / "config" / "align_node.yaml").read_text()
+    assert len(text.splitlines()) <= 60, "issue 40: a params file a user can hold"
+    shipped = yaml.safe_load(text)["/**"]["ros__parameters"]
+    user, declared = user_parameters(), node_parameters()
+    assert list(shipped) == list(user), "the file holds exactly the user tier, in the schema's order"
+    assert set(user) <= set(declared), "each user parameter is one the node declares"
+    assert all(shipped[n] == (list(p.default) if p.kind is tuple else p.default) for n, p in user.items())
+    assert 10 <= len(user) <= 20, "about 15 user parameters; the rest are expert ones"
+    assert {"input_topic", "odom_frame", "base_frame", "publish_tf", "preprocess.max_range",
+            "preprocess.deskew", "registration.device"} <= set(user)
+    assert "Expert parameters" in text and "docs/node.md" in text, "the header points to the expert tier"
+
+
+def _table_names(markdown: str, heading: str) -> list:
+    """The parameter names of the tables under ``heading`` (a '### ' heading), up to the next '### ' heading."""
+    names, inside = [], False
+    for line in markdown.splitlines():
+        if line.startswith("### "):
+            inside = line == heading
+        elif inside and line.startswith("| `"):
+            names.append(line.split("`")[1])
+    return names
+
+
+def test_docs_tables_hold_the_user_tier_then_every_other_parameter_once():
+    from cemnet_ros.ros.node_config import parameters_markdown, user_parameters
+
+    markdown = parameters_markdown()
+    user, expert = _table_names(markdown, "### User parameters"), _table_names(markdown, "### Expert parameters")
+    declared = node_parameters()
+    assert user == list(user_parameters())
+    assert len(user) + len(expert) == len(set(user) | set(expert)) == len(declared), "each parameter once"
+    assert set(user) | set(expert) == set(declared), "every declared node parameter is in one of the two tables"
+    assert "#### `recovery.*`: when and how widely the global search runs" in markdown  # expert ones by section
 
 
 def _limited_fields(config_class):

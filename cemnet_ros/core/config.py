@@ -68,7 +68,8 @@ class EngineConfig:
     allow_pickle: bool = param(False, "allow loading pickled (.pth) weights: only for files you trust")
     batchnorm: str = param("running", "BatchNorm statistics of the network ('batch' as the reference, which "
                            "never calls eval())", choices=("batch", "running"))
-    device: str = param("auto", "torch device: 'auto' (CUDA when available), 'cpu', 'cuda', 'cuda:1', ...")
+    device: str = param("auto", "torch device: 'auto' (CUDA when available), 'cpu', 'cuda', 'cuda:1', ...",
+                        user=True)
     seed: int = param(0, "seed of the point sub-sampling; -1 = unseeded", low=-1)
 
     def __post_init__(self) -> None:

@@ -15,10 +15,10 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    first pair, after a failed step and on request;
 5. **commit** the outcome: an accepted step moves the pose, the map, the motion model, the adaptive spread and
    the running fitness level; a failed one is published flagged with the prediction and changes nothing else
-   (too many in a row restart the map, where :mod:`.steps.lost_streak` says; the level stays); a degenerate one
-   keeps the prediction along the unconstrained directions, is flagged, and still extends the map; a near-tie is
-   flagged and moves the pose only. The step's covariance is its registration's plus the previous pose's error
-   against the map (:func:`~.steps.covariance.carried_into_step`).
+   (too many in a row restart the map, where :mod:`.steps.lost_streak` says, and the level with it); a
+   degenerate one keeps the prediction along the unconstrained directions, is flagged, and still extends the map;
+   a near-tie is flagged and moves the pose and the level only. The step's covariance is its registration's plus
+   the previous pose's error against the map (:func:`~.steps.covariance.carried_into_step`).
 
 Pair mode (:mod:`.pair_mode`) runs steps 0-4 against a map of the target cloud. Poses are ``T_odom_sensor``;
 odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.

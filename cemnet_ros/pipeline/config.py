@@ -111,15 +111,19 @@ class PreprocessConfig:
     """What of a scan is used (metres from the sensor)."""
 
     scale: float = param(0.0, "metres per network unit; 0 = auto (robust radius of the first scan)", low=0.0)
-    voxel_size: float = param(0.0, "voxel grid (m); 0 = auto (scale / 100), negative = no voxel grid", low=-1.0)
-    min_range: float = param(0.0, "drop points closer than this to the sensor (m); 0 = off", low=0.0)
-    max_range: float = param(100.0, "drop points farther than this from the sensor (m); 0 = off", low=0.0)
+    voxel_size: float = param(0.0, "voxel grid (m); 0 = auto (scale / 100), negative = no voxel grid", low=-1.0,
+                              user=True)
+    min_range: float = param(0.0, "drop points closer than this to the sensor (m); 0 = off", low=0.0,
+                             user=True)
+    max_range: float = param(100.0, "drop points farther than this from the sensor (m); 0 = off", low=0.0,
+                               user=True)
     min_points: int = param(50, "a scan with fewer points after preprocessing is rejected", low=3)
     sampling: str = param("random", "how the voxel cloud is cut to registration.n_points", choices=SAMPLING_METHODS)
     cem_radius: float = param(1.5, "the CEM's clouds keep the points this close to the sensor (units of scale)",
                               low=1e-3)
-    deskew: bool = param(True, "with per-point times: undo the motion within each sweep (constant velocity; "
-                         "registered at the sweep's middle, published at the stamp)")
+    deskew: bool = param(True, "with per-point times (the first field of t, time, offset_time, timestamp; its "
+                         "unit detected): undo the motion within each sweep (constant velocity; registered at the "
+                         "sweep's middle, published at the stamp); false = no deskew", user=True)
 
     def __post_init__(self) -> None:
         validate(self)

@@ -1,12 +1,13 @@
 """The node's parameters: its own (topics, frames, QoS, outputs) and the pipeline's, from one schema.
 
 No rclpy here: the params file, the docs table and the tests read the same schema without a ROS install.
-Regenerate the shipped params file with ``python -m cemnet_ros.ros.node_config > config/align_node.yaml`` and
-the docs' table with ``--markdown``.
+Two tiers (:func:`cemnet_ros.schema.param`'s ``user``): about 15 user parameters, the shipped params file's and
+the docs' first table, and the expert rest, documented apart. Regenerate the shipped params file with
+``python -m cemnet_ros.ros.node_config > config/align_node.yaml`` and the docs' tables with ``--markdown``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
 from cemnet_ros.pipeline.config import AlignerConfig
@@ -23,22 +24,25 @@ class NodeConfig:
     the ``dynamic`` ones (the save paths) again when it uses them: their values here are those at start-up."""
 
     mode: str = param("sequential", "'sequential' (scan-to-map odometry) or 'pair' (source to target topic)",
-                      choices=MODES)
-    input_topic: str = param("points", "PointCloud2 input of sequential mode")
-    source_topic: str = param("source", "PointCloud2 source of pair mode")
-    target_topic: str = param("target", "PointCloud2 target of pair mode (subscribed TRANSIENT_LOCAL by default)")
+                      choices=MODES, user=True)
+    input_topic: str = param("points", "PointCloud2 input of sequential mode", user=True)
+    source_topic: str = param("source", "PointCloud2 source of pair mode", user=True)
+    target_topic: str = param("target", "PointCloud2 target of pair mode (subscribed TRANSIENT_LOCAL by default)",
+                               user=True)
     target_transient_local: bool = param(True, "pair mode: subscribe the target RELIABLE + TRANSIENT_LOCAL (a "
                                          "latched map); false = same QoS as the source")
     pair_tolerance: float = param(0.05, "pair mode: max |stamp difference| in s; 0 = always use the latest target",
                                   low=0.0, high=3600.0)
-    odom_frame: str = param("odom", "parent frame of the pose, odometry and TF (REP-105)")
-    base_frame: str = param("base_link", "the robot's frame: child of odometry and TF, whose motion is published")
+    odom_frame: str = param("odom", "parent frame of the pose, odometry and TF (REP-105)", user=True)
+    base_frame: str = param("base_link", "the robot's frame: child of odometry and TF, whose motion is published",
+                            user=True)
     base_to_sensor: tuple = param((0.0,) * 6, "pose of the sensor in base_frame (x y z m, roll pitch yaw rad), "
-                                  "used when TF does not give it (no tf2_ros, or no transform)")
-    publish_tf: bool = param(True, "publish odom -> base_frame on /tf")
-    invert_tf: bool = param(False, "publish base_frame -> odom instead (when another node owns odom -> base)")
+                                  "used when TF does not give it (no tf2_ros, or no transform)", user=True)
+    publish_tf: bool = param(True, "publish odom -> base_frame on /tf", user=True)
+    invert_tf: bool = param(False, "publish base_frame -> odom instead (when another node owns odom -> base)",
+                           user=True)
     qos_reliability: str = param("best_effort", "input QoS reliability ('best_effort' = sensor data)",
-                                 choices=RELIABILITIES)
+                                 choices=RELIABILITIES, user=True)
     qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
     queue_size: int = param(8, "scans waiting for the worker (8 absorb a global search at 20 Hz); when full the "
                             "oldest is dropped", low=1, high=100)
@@ -59,7 +63,7 @@ class NodeConfig:
                                       "each; 1e6 = 28 h at 10 Hz); beyond it the oldest are dropped", low=1,
                                       high=100_000_000)
     save_directory: str = param("", "folder of the saved files whose path is relative; '' = $ROS_HOME/cemnet_ros "
-                                "(~/.ros/cemnet_ros); created when missing", dynamic=True)
+                                "(~/.ros/cemnet_ros); created when missing", dynamic=True, user=True)
     save_map_path: str = param("cemnet_map_{time}.pcd", "~/save_map writes the local map (odom_frame) here: .pcd "
                                "(binary) or .ply; {time} = the local date and time", dynamic=True)
     save_trajectory_path: str = param("cemnet_trajectory_{time}.tum", "~/save_trajectory writes the published "
@@ -88,25 +92,53 @@ def configs_from_parameters(values: Mapping[str, Any]) -> tuple[NodeConfig, Alig
     return node, pipeline
 
 
-HEADER = """align_node parameters (ROS 2 params file, keyed /** so that it applies under any namespace or node name).
+HEADER = """align_node's user parameters (ROS 2 params file, keyed /** to apply under any namespace or node name).
   ros2 launch cemnet_ros align_node.launch.py   (uses the installed copy of this file)
   ros2 run cemnet_ros align_node --ros-args \\
     --params-file $(ros2 pkg prefix cemnet_ros)/share/cemnet_ros/config/align_node.yaml
-Every parameter is read once at start-up, but the save_* ones ("settable at runtime": ros2 param set).
+Read once at start-up, but save_directory ("settable at runtime": ros2 param set).
+Every other parameter is an expert setting, at its default unless set: add it here (or -p name:=value) the same
+way; docs/node.md ("Expert parameters") lists them all with their defaults and help.
 Generated from the schema: python -m cemnet_ros.ros.node_config"""
 
 
+def user_parameters() -> dict[str, Parameter]:
+    """The user tier of :func:`node_parameters` (what a ROS user sets on a robot), by name."""
+    return {name: p for name, p in node_parameters().items() if p.user}
+
+
 def params_file_text() -> str:
-    return params_yaml(node_parameters(), HEADER)
+    """The shipped params file: the user tier at its defaults (the expert tier stays at the schema's)."""
+    return params_yaml(user_parameters(), HEADER)
+
+
+def _table(params: Mapping[str, Parameter]) -> list[str]:
+    rows = ["| name | default | meaning |", "| --- | --- | --- |"]
+    for p in params.values():
+        default = list(p.default) if p.kind is tuple else "''" if p.default == "" else p.default
+        rows.append(f"| `{p.name}` | `{default}` | {p.describe().replace('|', '/')} |")
+    return rows
 
 
 def parameters_markdown() -> str:
-    """The docs' parameter table (docs/node.md holds it between markers; a test compares)."""
-    rows = ["| name | default | meaning |", "| --- | --- | --- |"]
-    for p in node_parameters().values():
-        default = list(p.default) if p.kind is tuple else p.default
-        rows.append(f"| `{p.name}` | `{default}` | {p.describe().replace('|', '/')} |")
-    return "\n".join(rows) + "\n"
+    """The docs' two parameter tables, the user tier then the expert one by section (docs/node.md holds them
+    between markers; a test compares)."""
+    params = node_parameters()
+    user = {name: p for name, p in params.items() if p.user}
+    lines = ["### User parameters", "",
+             "What a ROS user sets on a robot; `config/align_node.yaml` holds these alone, at their defaults.", "",
+             *_table(user), "", "### Expert parameters", "",
+             "Every other parameter: declared and settable the same way (a params file, `-p name:=value`), at its "
+             "default unless set. By section:"]
+    sections = {f.name: f.metadata["help"] for f in fields(AlignerConfig)}
+    groups: dict[str, dict[str, Parameter]] = {}
+    for name, p in params.items():
+        if not p.user:
+            groups.setdefault(name.split(".")[0] if "." in name else "", {})[name] = p
+    for prefix, group in groups.items():
+        title = f"`{prefix}.*`: {sections[prefix]}" if prefix else "the node's own (topics, QoS, outputs)"
+        lines += ["", f"#### {title[0].upper()}{title[1:]}", "", *_table(group)]
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

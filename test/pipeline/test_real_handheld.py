@@ -18,7 +18,7 @@ from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.steps.frame import Preprocessor
 
 YAWS_DEG = (0.0, 25.0, -10.0, 35.0, -15.0, 40.0)  # the sensor's yaw in the KITTI frame at each scan
-STAMPS_S = (0.0, 0.1, 0.35, 0.45, 1.7, 1.8)  # irregular, with a gap longer than recovery.gap
+STAMPS_S = (0.0, 0.1, 0.35, 0.45, 1.7, 1.8)  # irregular, with a gap of 1.25 s (12 usual steps)
 
 
 def handheld_stream():

@@ -13,7 +13,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # read when the DDS p
 from rclpy.parameter import Parameter  # noqa: E402
 
 from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
-from cemnet_ros.ros.node_config import node_parameters, params_file_text  # noqa: E402
+from cemnet_ros.ros.node_config import node_parameters, params_file_text, user_parameters  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -22,19 +22,22 @@ def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_n
     path = REPO / "config" / "align_node.yaml"
     assert path.read_text() == params_file_text(), "regenerate: python -m cemnet_ros.ros.node_config"
     params = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
-    schema = node_parameters()
-    assert set(params) == set(schema)
-    assert all(params[n] == (list(p.default) if p.kind is tuple else p.default) for n, p in schema.items())
+    user = user_parameters()  # the file holds the user tier; the node declares every parameter, both tiers
+    assert set(params) == set(user)
+    assert all(params[n] == (list(p.default) if p.kind is tuple else p.default) for n, p in user.items())
     changed = tmp_path / "robot.yaml"
     changed.write_text("/**:\n  ros__parameters:\n    registration.cem.n_iters: 7\n    base_frame: robot1/base\n")
     node = AlignNode(context=context, cli_args=["--ros-args", "-r", "__ns:=/robot1", "-r", "__node:=lidar_odom",
                                                 "--params-file", str(path), "--params-file", str(changed)])
     try:
         assert node.get_fully_qualified_name() == "/robot1/lidar_odom"
+        assert all(node.has_parameter(name) for name in node_parameters()), "expert ones stay declared"
+        defaults = node_parameters()  # an expert parameter the file leaves out keeps the schema's default
+        assert node.get_parameter("health.min_fitness").value == defaults["health.min_fitness"].default
         assert node.get_parameter("registration.cem.n_iters").value == 7
         assert node.get_parameter("mode").value == "sequential"
         cem = node._session.config.registration.cem  # the parameters reach the pipeline's config
-        assert (cem.n_iters, cem.n_candidates) == (7, params["registration.cem.n_candidates"])
+        assert (cem.n_iters, cem.n_candidates) == (7, defaults["registration.cem.n_candidates"].default)
         assert node.alignment._cfg.base_frame == "robot1/base"
         result = node.set_parameters([Parameter("registration.n_points", value=100)])[0]  # read-only
         assert not result.successful

@@ -138,34 +138,52 @@ def test_the_node_gets_the_dds_profile_or_none_at_all(install_prefix, argument, 
     assert launch.returncode == 0 and "XML" not in output.text(timeout=10.0), output.text()
 
 
+class LifecycleClient:
+    """A manager's view of ``/align_node`` on ``domain``: its state and its transitions (``output``: the process
+    whose log a failed call shows)."""
+
+    def __init__(self, domain: int, output) -> None:
+        self.output = output
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("lifecycle_manager", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._get = self.node.create_client(GetState, "/align_node/get_state")
+        self._change = self.node.create_client(ChangeState, "/align_node/change_state")
+        assert self._get.wait_for_service(60.0) and self._change.wait_for_service(10.0), output.text()
+
+    def _call(self, client, request):
+        future = client.call_async(request)
+        self.executor.spin_until_future_complete(future, timeout_sec=FIRST_TIMEOUT)
+        assert future.done(), self.output.text()
+        return future.result()
+
+    def state(self) -> str:
+        return self._call(self._get, GetState.Request()).current_state.label
+
+    def change(self, transition: int) -> bool:
+        return self._call(self._change, ChangeState.Request(transition=Transition(id=transition))).success
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
 def test_ros2_run_starts_the_lifecycle_node_unconfigured_and_configure_loads_it(install_prefix):
     domain = domain_id()
     node, output = start(["ros2", "run", "cemnet_ros", "align_lifecycle_node"], ros_environment(install_prefix, domain))
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    client_node = rclpy.create_node("lifecycle_client", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(client_node)
+    manager = None
     try:
-        get = client_node.create_client(GetState, "/align_node/get_state")
-        change = client_node.create_client(ChangeState, "/align_node/change_state")
-        assert get.wait_for_service(60.0) and change.wait_for_service(10.0), output.text()
-
-        def call(client, request):
-            future = client.call_async(request)
-            executor.spin_until_future_complete(future, timeout_sec=FIRST_TIMEOUT)
-            assert future.done(), output.text()
-            return future.result()
-
-        assert call(get, GetState.Request()).current_state.label == "unconfigured"
-        configure = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE))
-        assert call(change, configure).success, output.text()
-        assert call(get, GetState.Request()).current_state.label == "inactive"
+        manager = LifecycleClient(domain, output)
+        assert manager.state() == "unconfigured"
+        assert manager.change(Transition.TRANSITION_CONFIGURE), output.text()
+        assert manager.state() == "inactive"
         interrupt(node)
     finally:
-        executor.shutdown()
-        client_node.destroy_node()
-        rclpy.shutdown(context=context)
+        if manager is not None:
+            manager.close()
         kill_group(node)
     log = output.text(timeout=10.0)
     assert node.returncode == 0 and "configured: engine ready" in log and "Traceback" not in log, log
@@ -209,31 +227,17 @@ def test_lifecycle_true_autostart_false_leaves_the_node_to_a_lifecycle_manager(i
     """What a manager (nav2_lifecycle_manager, ``ros2 lifecycle set``) finds: an unconfigured node that it drives."""
     domain = domain_id()
     launch, output = start([*LAUNCH, "lifecycle:=true", "autostart:=false"], ros_environment(install_prefix, domain))
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
-    manager = rclpy.create_node("lifecycle_manager", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(manager)
+    manager = None
     try:
-        get = manager.create_client(GetState, "/align_node/get_state")
-        change = manager.create_client(ChangeState, "/align_node/change_state")
-        assert get.wait_for_service(60.0) and change.wait_for_service(10.0), output.text()
-
-        def call(client, request):
-            future = client.call_async(request)
-            executor.spin_until_future_complete(future, timeout_sec=FIRST_TIMEOUT)
-            assert future.done(), output.text()
-            return future.result()
-
-        assert call(get, GetState.Request()).current_state.label == "unconfigured"
+        manager = LifecycleClient(domain, output)
+        assert manager.state() == "unconfigured"
         for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
-            assert call(change, ChangeState.Request(transition=Transition(id=transition))).success, output.text()
-        assert call(get, GetState.Request()).current_state.label == "active"
+            assert manager.change(transition), output.text()
+        assert manager.state() == "active"
         interrupt(launch)
     finally:
-        executor.shutdown()
-        manager.destroy_node()
-        rclpy.shutdown(context=context)
+        if manager is not None:
+            manager.close()
         kill_group(launch)
     log = output.text(timeout=10.0)
     assert launch.returncode == 0 and "Traceback" not in log, log

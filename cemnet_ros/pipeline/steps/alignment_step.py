@@ -26,7 +26,7 @@ class AlignmentStep:
     n_points: int
     reason: str = ""
     recovered: bool = False  # this step ran the global search
-    recovery_reason: str = ""  # why it ran (first pair, stamp gap, tracking failed, requested)
+    recovery_reason: str = ""  # why it ran (first pair, the previous step failed, tracking failed, requested)
     outcome: str = Outcome.ACCEPTED.value  # the decision's outcome (:class:`~.decision.Outcome`)
     signals: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)  # (kind, message) from the input checks (decimated, restarted)

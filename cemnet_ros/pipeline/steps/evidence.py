@@ -15,10 +15,11 @@
   **neighbours** (its basin checked on a weakly constrained view);
 - which answers the map's last scan **saw through**: an answer that puts more of the scan where that scan saw
   empty space (:mod:`~cemnet_ros.pipeline.map.free_space`) than ``health.max_seen_through`` x its fitness (the
-  share it puts on the map's surfaces) contradicts what the map saw more than it agrees with it, and does not
-  compete (measured most consistent first, until one passes, and for its near-ties: a few milliseconds a scan). A wrong pose that fits the ground and a few walls (a car that "did not move" on a road)
-  puts what the scan saw ahead inside what the map's scan saw through; fitness and coverage cannot tell it from
-  the right one where the two views overlap little.
+  share it puts on the map's surfaces) contradicts what the map saw, and does not compete (measured most
+  consistent first, until one passes, and for its near-ties: a few milliseconds a scan). A wrong pose that fits
+  the ground and a few walls (a car that "did not move" on a road) puts what the scan saw ahead inside what the
+  map's scan saw through; fitness and coverage cannot tell it from the right one where the two views overlap
+  little.
 """
 from __future__ import annotations
 

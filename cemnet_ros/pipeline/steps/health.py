@@ -2,8 +2,8 @@
 
 The level is what the decision (:mod:`.decision`) compares a new answer's fitness with: how much of a scan lies
 on the map's surfaces depends on the sensor, its density and the scene, so a right answer is one that fits about
-as well as the recent vouched steps did. It belongs to the trajectory, not to one map: a lost map restarts, the
-level stays (a map restarted on a scan no step has vouched for is no evidence of what right answers fit).
+as well as the recent vouched steps did. It belongs to one map: a restarted map's steps set it again (what right
+answers fit depends on the scene, and until they do the decision has no level to confirm with).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Where a lost trajectory's map restarts (step 6 of the recipe in :mod:`..aligner`): the failed steps' own answers
+"""Where a lost trajectory's map restarts (step 5 of the recipe in :mod:`..aligner`): the failed steps' own answers
 when they move steadily, else the motion prediction.
 
 A step into new ground (a car through a gap of a second) registers right but fits below the running level: the
@@ -6,7 +6,7 @@ map has not seen a quarter of the scan. Each failed step is flagged; after ``rec
 map restarts from the scan. The prediction extrapolates the motion from before the failures (a car's weave
 over a second turns it degrees off); the failed steps' answers are evidence of their own when they agree with
 one another: the last one lies where the constant-velocity motion of the ones before it puts it, within the
-precision the node vouches for (:data:`~.contest.DISTINCT_M`, :data:`~.contest.DISTINCT_RAD`). A hand-held
+precision the node vouches for (:data:`~.answer.DISTINCT_M`, :data:`~.answer.DISTINCT_RAD`). A hand-held
 sensor's answers, right or wrong, did not move so steadily on any lost stretch measured (docs/odometry.md, "Fast
 gaps"): there the prediction is kept, as before.
 """
