@@ -132,7 +132,11 @@ def test_an_answer_that_contradicts_what_the_map_saw_empty_does_not_compete():
     wrong, right = answer(x=0.1, fitness=LEVEL, coverage=1.0, explained=True), answer(x=3.0, fitness=LEVEL,
                                                                                       coverage=0.99)
     record = evidence(wrong, right, searched=True, seen_through=lambda a: through if a is wrong else 0.0)
-    assert record.leader is right and record.contradicted == (wrong,)
+    assert record.leader is right and record.contradicted == (wrong,) and record.rival is None
+    # ranked below the leader, within its near-tie margin: no near-tie and no rival either
+    below = answer(x=0.1, fitness=LEVEL, coverage=0.98)
+    record = evidence(right, below, searched=True, seen_through=lambda a: through if a is below else 0.0)
+    assert record.leader is right and record.contradicted == (below,) and record.tied == () and record.rival is None
     assert decide(record, RULES).outcome == Outcome.ACCEPTED
     # even where the prediction expects it and the level confirms it: what the map saw empty outweighs both
     alone = evidence(answer(explained=True), seen_through=lambda a: through)

@@ -98,7 +98,8 @@ class Evidence:
         nearest = int(np.argmin([metres + a.conditioning.length * radians for a, (metres, radians)
                                  in zip(tied, offsets)]))
         leader = tied[nearest]
-        rival = next((a for a in ranked if distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)
+        rival = next((a for a in ranked if not any(a is c for c in contradicted)
+                      and distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)  # a competitor, distinct
         return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, support(leader),
                    offsets[nearest], searched, neighbours_checked, tuple(contradicted), missing)
 
