@@ -116,7 +116,7 @@ class PreprocessConfig:
     min_range: float = param(0.0, "drop points closer than this to the sensor (m); 0 = off", low=0.0,
                              user=True)
     max_range: float = param(100.0, "drop points farther than this from the sensor (m); 0 = off", low=0.0,
-                               user=True)
+                             user=True)
     min_points: int = param(50, "a scan with fewer points after preprocessing is rejected", low=3)
     sampling: str = param("random", "how the voxel cloud is cut to registration.n_points", choices=SAMPLING_METHODS)
     cem_radius: float = param(1.5, "the CEM's clouds keep the points this close to the sensor (units of scale)",

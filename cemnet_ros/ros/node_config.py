@@ -28,7 +28,7 @@ class NodeConfig:
     input_topic: str = param("points", "PointCloud2 input of sequential mode", user=True)
     source_topic: str = param("source", "PointCloud2 source of pair mode", user=True)
     target_topic: str = param("target", "PointCloud2 target of pair mode (subscribed TRANSIENT_LOCAL by default)",
-                               user=True)
+                              user=True)
     target_transient_local: bool = param(True, "pair mode: subscribe the target RELIABLE + TRANSIENT_LOCAL (a "
                                          "latched map); false = same QoS as the source")
     pair_tolerance: float = param(0.05, "pair mode: max |stamp difference| in s; 0 = always use the latest target",
@@ -40,7 +40,7 @@ class NodeConfig:
                                   "used when TF does not give it (no tf2_ros, or no transform)", user=True)
     publish_tf: bool = param(True, "publish odom -> base_frame on /tf", user=True)
     invert_tf: bool = param(False, "publish base_frame -> odom instead (when another node owns odom -> base)",
-                           user=True)
+                            user=True)
     qos_reliability: str = param("best_effort", "input QoS reliability ('best_effort' = sensor data)",
                                  choices=RELIABILITIES, user=True)
     qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
@@ -123,16 +123,14 @@ def _table(params: Mapping[str, Parameter]) -> list[str]:
 def parameters_markdown() -> str:
     """The docs' two parameter tables, the user tier then the expert one by section (docs/node.md holds them
     between markers; a test compares)."""
-    params = node_parameters()
-    user = {name: p for name, p in params.items() if p.user}
     lines = ["### User parameters", "",
              "What a ROS user sets on a robot; `config/align_node.yaml` holds these alone, at their defaults.", "",
-             *_table(user), "", "### Expert parameters", "",
+             *_table(user_parameters()), "", "### Expert parameters", "",
              "Every other parameter: declared and settable the same way (a params file, `-p name:=value`), at its "
              "default unless set. By section:"]
     sections = {f.name: f.metadata["help"] for f in fields(AlignerConfig)}
     groups: dict[str, dict[str, Parameter]] = {}
-    for name, p in params.items():
+    for name, p in node_parameters().items():
         if not p.user:
             groups.setdefault(name.split(".")[0] if "." in name else "", {})[name] = p
     for prefix, group in groups.items():
