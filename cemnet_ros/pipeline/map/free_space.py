@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 
 MIN_RANGE_M = 0.5  # points this close to a sensor carry no direction worth the name
 RAYS = 8  # rays compared within the angular spacing
-MAX_RAYS = 6000  # rays kept (a dense scan's are strided: the build is most of the cost, the spacing adapts)
+MAX_RAYS = 6000  # rays kept (a dense scan's are subsampled: the build is most of the cost, the spacing adapts)
 SPACING_SAMPLES = 500  # rays whose nearest neighbour measures the spacing (a median: a sample tells it)
 MARGIN_M, RELATIVE_MARGIN = 1.0, 0.05  # in front of a hit by more than this is through it
 
@@ -32,7 +32,9 @@ class FreeSpace:
     def __init__(self, points: np.ndarray, sensor: Optional[np.ndarray] = None) -> None:
         self.sensor = np.zeros(3) if sensor is None else np.asarray(sensor, dtype=np.float64).reshape(3)
         rays = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        rays = rays[::-(-len(rays) // MAX_RAYS)] - self.sensor  # every k-th ray: real hits, a wider spacing
+        if len(rays) > MAX_RAYS:  # a seeded subset: real hits, a wider spacing, no stride aliasing an organised scan
+            rays = rays[np.sort(np.random.default_rng(0).choice(len(rays), MAX_RAYS, replace=False))]
+        rays = rays - self.sensor
         ranges = np.linalg.norm(rays, axis=1)
         kept = ranges > MIN_RANGE_M
         self.ranges = ranges[kept]
