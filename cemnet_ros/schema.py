@@ -1,7 +1,7 @@
 """One parameter schema: each setting's default, help, range and choices live in its config dataclass field.
 
 The node declares its ROS parameters from it, the CLIs build their flags from it, and params files are written
-and checked against it. Names are dotted by section, as in KISS-ICP: ``registration.cem.n_iters``,
+and checked against it. Names are dotted by section, as in KISS-ICP: ``recovery.search.n_scatter``,
 ``preprocess.max_range``. No dependency beyond the standard library (the core imports it).
 """
 from __future__ import annotations

@@ -36,7 +36,7 @@ from cemnet_ros.core.network import SamplingNetwork  # noqa: E402
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, inside_obstacle, lidar_scan  # noqa: E402
 from cemnet_ros.eval.metrics import pair_metrics  # noqa: E402
 from cemnet_ros.io.atomic import atomic_write_text  # noqa: E402
-from cemnet_ros.pipeline.config import odometry_registration  # noqa: E402
+from cemnet_ros.pipeline.cem_presets import cem_preset  # noqa: E402
 from cemnet_ros.replay.bag_io import BagWriter  # noqa: E402
 from cemnet_ros.train.bag_scans import read_bag_scans  # noqa: E402
 from cemnet_ros.train.config import TrainConfig  # noqa: E402
@@ -46,8 +46,8 @@ LOOPS = {"east": [(24, -1), (34, -1), (44, -2), (45, 8), (44, 17), (37, 18), (34
          "west": [(-15, -2), (-3, -2.5), (10, -1.5), (12, -9), (12, -11.5), (9, -12.8), (4, -12.8), (-2, -12.8),
                   (-8, -12.8), (-10, -10), (-15, -7)]}
 START_NS, PERIOD_NS = 1_700_000_000_000_000_000, 100_000_000
-CEMS = {"node tracking CEM (N 100, T 2)": odometry_registration().cem,
-        "paper CEM (N 1000, T 10, M 3)": RegistrationConfig().cem}
+CEMS = {"node tracking CEM (N 100, T 2)": cem_preset("tracking", 0),
+        "paper CEM (N 1000, T 10, M 3)": cem_preset("paper", 0)}
 
 
 def loop_poses(waypoints: list[tuple[float, float]], step: float = 0.7) -> list[np.ndarray]:

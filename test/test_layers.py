@@ -13,7 +13,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "cemnet_ros"
 LAYERS = [
     ("cemnet_ros.schema", "cemnet_ros.io"),
     ("cemnet_ros.core",),
-    ("cemnet_ros.point_times", "cemnet_ros.pointcloud2", "cemnet_ros.pipeline.config", "cemnet_ros.pipeline.errors"),
+    ("cemnet_ros.point_times", "cemnet_ros.pointcloud2", "cemnet_ros.pipeline.cem_presets",
+     "cemnet_ros.pipeline.config", "cemnet_ros.pipeline.errors"),
     ("cemnet_ros.pipeline.map",),
     ("cemnet_ros.pipeline.steps",),
     ("cemnet_ros.pipeline.aligner", "cemnet_ros.pipeline.pair_mode"),

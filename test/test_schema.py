@@ -15,23 +15,28 @@ from cemnet_ros.schema import add_arguments, build, flatten_mapping, parameters,
 def test_every_field_of_every_config_is_documented_and_named_by_section():
     params = node_parameters()
     assert all(p.help for p in params.values())
-    assert "registration.cem.n_iters" in params and "preprocess.max_range" in params and "mode" in params
+    assert "registration.cem_preset" in params and "preprocess.max_range" in params and "mode" in params
     assert not {"registration.prior", "registration.prior_sigma"} & set(params)  # the pipeline: tracking.centre
-    assert params["registration.cem.n_iters"].default == AlignerConfig().registration.cem.n_iters
-    assert set(parameters(RegistrationConfig())) >= {"cem.n_candidates", "prior", "weights", "n_points"}
+    assert params["registration.cem_preset"].default == AlignerConfig().registration.cem_preset == "tracking"
+    assert params["registration.cem_preset"].choices == ("tracking", "refine", "paper")
+    assert set(parameters(RegistrationConfig())) >= {"cem.n_candidates", "cem.seed", "prior", "weights", "n_points"}
 
 
 def test_build_applies_dotted_values_and_refuses_bad_ones():
-    config = build(AlignerConfig(), {"registration.cem.n_iters": 4, "preprocess.max_range": 50,
+    config = build(AlignerConfig(), {"registration.cem_preset": "paper", "preprocess.max_range": 50,
                                      "recovery.search.resample_sigma": [0.1] * 6})
-    assert config.registration.cem.n_iters == 4 and config.preprocess.max_range == 50.0
+    assert config.registration.cem_preset == "paper" and config.preprocess.max_range == 50.0
     assert isinstance(config.preprocess.max_range, float) and config.recovery.search.resample_sigma == (0.1,) * 6
-    assert config.registration.cem.n_candidates == AlignerConfig().registration.cem.n_candidates
-    for gone in ("registration.prior", "tracking.prior", "recovery.prior", "recovery.search.n_prior"):
-        with pytest.raises(ValueError, match="unknown parameter"):  # renamed (CHANGELOG, issue 29): no aliases
-            build(AlignerConfig(), {gone: "identity"})
+    assert config.recovery.search.refine_preset == AlignerConfig().recovery.search.refine_preset
+    for gone in ("registration.prior", "tracking.prior", "recovery.prior", "recovery.search.n_prior",
+                 "registration.cem.n_iters", "recovery.search.refine.n_iters", "registration.seed",
+                 "registration.cem.seed", "recovery.search.refine.seed", "recovery.turn_yaw"):
+        with pytest.raises(ValueError, match="unknown parameter"):  # renamed (CHANGELOG, issues 29, 40): no aliases
+            build(AlignerConfig(), {gone: 1})
     with pytest.raises(ValueError, match="tracking.centre must be one of"):
         build(AlignerConfig(), {"tracking.centre": "magic"})
+    with pytest.raises(ValueError, match="registration.cem_preset must be one of"):
+        build(AlignerConfig(), {"registration.cem_preset": "fast"})
     with pytest.raises(ValueError, match="outside"):
         build(AlignerConfig(), {"health.min_fitness": 1.5})
     with pytest.raises(ValueError, match="expected an integer"):
@@ -44,21 +49,22 @@ def test_params_file_round_trips_to_the_defaults():
     data = yaml.safe_load(params_file_text())
     node, pipeline = configs_from_parameters(flatten_mapping(data["/**"]["ros__parameters"]))
     assert node == NodeConfig() and pipeline == AlignerConfig()
-    assert values(pipeline)["registration.cem.n_iters"] == pipeline.registration.cem.n_iters
+    assert values(pipeline)["recovery.search.refine_preset"] == pipeline.recovery.search.refine_preset
 
 
 def test_flags_are_built_from_the_schema():
     params = parameters(AlignerConfig())
     parser = argparse.ArgumentParser()
     add_arguments(parser, params, "pipeline")
-    args = parser.parse_args(["--registration.cem.n_iters", "3", "--preprocess.deskew", "false",
+    args = parser.parse_args(["--registration.cem-preset", "refine", "--seed", "3", "--preprocess.deskew", "false",
                               "--tracking.centre", "identity", "--recovery.search.refine_sigma", *["0.2"] * 6])
     overrides = parsed_overrides(args, params)
-    assert overrides == {"registration.cem.n_iters": 3, "preprocess.deskew": False, "tracking.centre": "identity",
-                         "recovery.search.refine_sigma": [0.2] * 6}
+    assert overrides == {"registration.cem_preset": "refine", "seed": 3, "preprocess.deskew": False,
+                         "tracking.centre": "identity", "recovery.search.refine_sigma": [0.2] * 6}
     assert build(AlignerConfig(), overrides).tracking.centre == "identity"
-    with pytest.raises(SystemExit):
-        parser.parse_args(["--tracking.centre", "magic"])
+    for bad in (["--tracking.centre", "magic"], ["--recovery.search.refine_preset", "fast"]):
+        with pytest.raises(SystemExit):
+            parser.parse_args(bad)
 
 
 def test_shipped_params_file_and_docs_tables_are_generated_from_the_schema():
@@ -137,14 +143,17 @@ def _validated_classes():
         PolishConfig,
         PreprocessConfig,
         RecoveryConfig,
+        RecoverySearchConfig,
         TrackingConfig,
+        TrackingEngineConfig,
     )
     from cemnet_ros.train.config import ScanPairConfig, TrainConfig
     from cemnet_ros.train.known_motion import KnownMotionConfig
 
     return [CEMConfig, RegistrationConfig, GlobalSearchConfig, PreprocessConfig, MapConfig, AdaptiveConfig,
             HealthConfig, InputChecksConfig, TrackingConfig, PolishConfig, RecoveryConfig, TrainConfig,
-            ScanPairConfig, KnownMotionConfig, ProtocolConfig, SevenScenesConfig]
+            ScanPairConfig, KnownMotionConfig, ProtocolConfig, SevenScenesConfig, AlignerConfig,
+            TrackingEngineConfig, RecoverySearchConfig]
 
 
 @pytest.mark.parametrize("config_class", _validated_classes(), ids=lambda c: c.__name__)

@@ -55,12 +55,10 @@ class CEMConfig:
 
 
 @dataclass
-class EngineConfig:
-    """The CEM, its clouds and its network: everything :func:`cemnet_ros.core.register` needs besides the two
-    clouds and where the CEM's initial distribution comes from (a caller that decides that, as the scan
-    pipeline does, configures this alone)."""
+class NetworkConfig:
+    """The sampling network, the clouds it takes and the device: the engine's settings besides its CEM and seed
+    (which the scan pipeline chooses by preset and from its one seed)."""
 
-    cem: CEMConfig = section(CEMConfig, "the cross-entropy method")
     n_points: int = param(768, "points per cloud fed to the network and the CEM", low=32)
     weights: str = param("", "sampling network weights: '' = the package's (ModelNet40), 'official' = the "
                          "official clean checkpoint shipped converted, 'scan' = the package's LiDAR scan weights, or "
@@ -70,10 +68,19 @@ class EngineConfig:
                            "never calls eval())", choices=("batch", "running"))
     device: str = param("auto", "torch device: 'auto' (CUDA when available), 'cpu', 'cuda', 'cuda:1', ...",
                         user=True)
-    seed: int = param(0, "seed of the point sub-sampling; -1 = unseeded", low=-1)
 
     def __post_init__(self) -> None:
         validate(self)
+
+
+@dataclass
+class EngineConfig(NetworkConfig):
+    """The CEM, its clouds and its network: everything :func:`cemnet_ros.core.register` needs besides the two
+    clouds and where the CEM's initial distribution comes from (a caller that decides that, as the scan
+    pipeline does, configures this alone)."""
+
+    cem: CEMConfig = section(CEMConfig, "the cross-entropy method")
+    seed: int = param(0, "seed of the point sub-sampling; -1 = unseeded", low=-1)
 
 
 @dataclass
@@ -91,9 +98,10 @@ class RegistrationConfig(EngineConfig):
 
 
 @dataclass
-class GlobalSearchConfig:
-    """How wide the global search looks (units: radians and engine units). It has no time budget: what a scan
-    yields never depends on the machine's speed."""
+class SearchScatterConfig:
+    """How wide the global search looks and how many hypotheses it keeps (units: radians and engine units): all
+    of it but the CEM refining them. It has no time budget: what a scan yields never depends on the machine's
+    speed."""
 
     n_scatter: int = param(2000, "candidates of the coarse scatter over yaw and translation", low=1)
     n_network: int = param(500, "with the network's prior (recovery.scatter 'network'): candidates drawn from it, "
@@ -112,10 +120,17 @@ class GlobalSearchConfig:
     min_separation_translation: float = param(0.1, "... and in translation (network units)", low=0.0)
     refine_sigma: Six = param((0.15, 0.02, 0.02, 0.05, 0.05, 0.01), "initial CEM spread per hypothesis (rad, "
                               "network units)", low=1e-6)
-    refine: CEMConfig = section(lambda: CEMConfig(n_candidates=100, n_iters=5, n_fused_iters=2),
-                                "the CEM that refines each hypothesis")
 
     def __post_init__(self) -> None:
         validate(self)
         if self.n_scatter < max(self.n_hypotheses, self.n_seeds):
             raise ValueError("n_scatter must be >= n_hypotheses and n_seeds")
+
+
+@dataclass
+class GlobalSearchConfig(SearchScatterConfig):
+    """Everything :func:`cemnet_ros.core.global_search.global_search` needs: the scatter and the CEM refining
+    each hypothesis."""
+
+    refine: CEMConfig = section(lambda: CEMConfig(n_candidates=100, n_iters=5, n_fused_iters=2),
+                                "the CEM that refines each hypothesis")

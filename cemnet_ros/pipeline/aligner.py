@@ -61,7 +61,7 @@ class ScanAligner:
         scatter with ``recovery.scatter`` 'network' (default: one loading ``recovery.weights``); built when absent."""
         self.config = config or AlignerConfig()
         prior = "network" if self.config.tracking.centre == "network" else "identity"  # a given centre: no network
-        registrar = registrar or Registrar(RegistrationConfig.of(self.config.registration, prior))
+        registrar = registrar or Registrar(RegistrationConfig.of(self.config.tracking_engine(), prior))
         self._preprocessor = Preprocessor(self.config)
         self._checks = InputChecks(self.config.checks)
         self._motion = ConstantVelocity()

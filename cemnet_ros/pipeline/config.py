@@ -1,16 +1,20 @@
 """Typed configuration of the scan pipeline: one schema (:mod:`cemnet_ros.schema`) for the node, the params
 file, the replay and the benchmarks.
 
-Sections by concern, named as the parameters are (``preprocess.max_range``): ``checks`` (plausibility of
-the input), ``preprocess``, ``registration`` (the tracking CEM's engine, :mod:`cemnet_ros.core.config`; where it
-is centred is ``tracking.centre``), ``tracking`` (where it searches), ``adaptive`` (how widely), ``map``,
-``polish``, ``health`` (the failure signals' limits) and ``recovery`` (the global search).
+One ``seed`` for the pipeline's random draws, then sections by concern, named as the parameters are
+(``preprocess.max_range``): ``checks`` (plausibility of the input), ``preprocess``, ``registration`` (the
+tracking CEM's engine, :mod:`cemnet_ros.core.config`; where it is centred is ``tracking.centre``), ``tracking``
+(where it searches), ``adaptive`` (how widely), ``map``, ``polish``, ``health`` (the failure signals' limits) and
+``recovery`` (the global search). Both CEMs are named presets (:mod:`.cem_presets`); the engine's configs they
+stand for come from :meth:`AlignerConfig.tracking_engine` and :meth:`AlignerConfig.global_search`.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
-from cemnet_ros.core.config import CEMConfig, EngineConfig, GlobalSearchConfig
+from cemnet_ros.core.config import EngineConfig, GlobalSearchConfig, NetworkConfig, SearchScatterConfig
+from cemnet_ros.pipeline.cem_presets import CEM_PRESET_NAMES, cem_preset
 from cemnet_ros.schema import param, section, validate
 
 SAMPLING_METHODS = ("random", "farthest")
@@ -18,13 +22,31 @@ TRACKING_CENTRES = ("motion", "network", "identity")
 RECOVERY_SCATTERS = ("uniform", "network")
 
 
-def odometry_registration() -> EngineConfig:
-    """CEM settings for tracking around a motion prediction: a short search (the recovery is the wide one).
+@dataclass
+class TrackingEngineConfig(NetworkConfig):
+    """The tracking CEM's engine: its network settings and its CEM by preset (the seed is the pipeline's)."""
 
-    512 points and a lattice of epsilon / 2 suffice there: the polish against the map gives the precision.
-    """
-    return EngineConfig(n_points=512, cem=CEMConfig(n_candidates=100, n_iters=2, n_fused_iters=0,
-                                                    lattice_spacing=0.5))
+    n_points: int = param(512, "points per cloud fed to the network and the tracking CEM (the polish against the "
+                          "map gives the precision)", low=32)
+    cem_preset: str = param("tracking", "the tracking CEM (docs/node.md: CEM presets)", choices=CEM_PRESET_NAMES)
+
+    def engine(self, seed: int) -> EngineConfig:
+        """The engine's config: these settings, the preset's CEM, ``seed`` for its sub-sampling and its CEM."""
+        network = {f.name: getattr(self, f.name) for f in dataclasses.fields(NetworkConfig)}
+        return EngineConfig(**network, cem=cem_preset(self.cem_preset, seed), seed=seed)
+
+
+@dataclass
+class RecoverySearchConfig(SearchScatterConfig):
+    """The global search's scatter and hypotheses, and the CEM refining each one by preset."""
+
+    refine_preset: str = param("refine", "the CEM that refines each hypothesis (docs/node.md: CEM presets)",
+                               choices=CEM_PRESET_NAMES)
+
+    def global_search(self, seed: int) -> GlobalSearchConfig:
+        """The core search's config: this scatter, the preset's CEM sampling with ``seed``."""
+        scatter = {f.name: getattr(self, f.name) for f in dataclasses.fields(SearchScatterConfig)}
+        return GlobalSearchConfig(**scatter, refine=cem_preset(self.refine_preset, seed))
 
 
 @dataclass
@@ -180,18 +202,19 @@ class PolishConfig:
 
 @dataclass
 class RecoveryConfig:
-    """When and how widely the global search runs (metres, radians, seconds)."""
+    """When and how widely the global search runs (metres and radians; degrees where named ``_deg``)."""
 
-    search: GlobalSearchConfig = section(GlobalSearchConfig, "the global CEM search")
+    search: RecoverySearchConfig = section(RecoverySearchConfig, "the global CEM search")
     radius: float = param(10.0, "translation radius (m) searched around the prediction; yaw is searched "
                                    "over the full circle", low=0.0)
     points: int = param(512, "source and map points the global search scores (the polish brings the "
                                  "precision)", low=32)
-    turn_yaw: float = param(90.0, "the search also polishes the last pose turned about its z axis by up to "
-                            "this (deg) either way; 0 = no turns", low=0.0, high=180.0)
-    turn_step: float = param(30.0, "... in steps of this (deg: about the wide polish's reach)", low=1.0, high=180.0)
-    turn_tilt: float = param(20.0, "... each also tilted by this (deg) about its x and y axes either way; 0 = "
-                             "yaw only", low=0.0, high=90.0)
+    turn_yaw_deg: float = param(90.0, "the search also polishes the last pose turned about its z axis by up to "
+                                "this (deg) either way; 0 = no turns", low=0.0, high=180.0)
+    turn_step_deg: float = param(30.0, "... in steps of this (deg: about the wide polish's reach)", low=1.0,
+                                 high=180.0)
+    turn_tilt_deg: float = param(20.0, "... each also tilted by this (deg) about its x and y axes either way; 0 = "
+                                 "yaw only", low=0.0, high=90.0)
     restart_after: int = param(3, "consecutive failed steps after which the map restarts from the scan (lost)",
                                low=1)
     scatter: str = param("uniform", "the global search's scatter: uniform only, or also recovery.search.n_network "
@@ -207,14 +230,27 @@ class RecoveryConfig:
 
 @dataclass
 class AlignerConfig:
-    """Everything the scan pipeline needs; sections by concern."""
+    """Everything the scan pipeline needs: its seed, then sections by concern."""
 
+    seed: int = param(0, "seed of the pipeline's random draws (the scan's and the map's subsets, the global "
+                      "search, both CEMs); -1 = the tracking CEM samples unseeded, the rest keeps seed 0", low=-1)
     checks: InputChecksConfig = section(InputChecksConfig, "plausibility checks a scan passes first")
     preprocess: PreprocessConfig = section(PreprocessConfig, "what of a scan is used")
-    registration: EngineConfig = section(odometry_registration, "the tracking CEM and its network")
+    registration: TrackingEngineConfig = section(TrackingEngineConfig, "the tracking CEM and its network")
     tracking: TrackingConfig = section(TrackingConfig, "where the tracking CEM searches")
     adaptive: AdaptiveConfig = section(AdaptiveConfig, "how widely it searches (from the recent prediction errors)")
     map: MapConfig = section(MapConfig, "the local map")
     polish: PolishConfig = section(PolishConfig, "the point-to-plane polish against the map")
     health: HealthConfig = section(HealthConfig, "the failure signals' limits")
     recovery: RecoveryConfig = section(RecoveryConfig, "when and how widely the global search runs")
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def tracking_engine(self) -> EngineConfig:
+        """The tracking CEM's engine config (its preset, the pipeline's seed)."""
+        return self.registration.engine(self.seed)
+
+    def global_search(self) -> GlobalSearchConfig:
+        """The global search's config (its refinement's preset, the pipeline's seed)."""
+        return self.recovery.search.global_search(self.seed)

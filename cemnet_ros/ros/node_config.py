@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
+from cemnet_ros.pipeline.cem_presets import CEM_PRESETS, cem_preset
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.schema import Parameter, build, param, parameters, params_yaml
 
@@ -120,22 +121,38 @@ def _table(params: Mapping[str, Parameter]) -> list[str]:
     return rows
 
 
+def _presets_table() -> list[str]:
+    rows = ["| preset | N | T | M | lattice spacing | for |", "| --- | --- | --- | --- | --- | --- |"]
+    for name, preset in CEM_PRESETS.items():
+        cem = cem_preset(name, 0)
+        rows.append(f"| `{name}` | {cem.n_candidates} | {cem.n_iters} | {cem.n_fused_iters} | "
+                    f"{cem.lattice_spacing} | {preset.purpose} |")
+    return rows
+
+
 def parameters_markdown() -> str:
-    """The docs' two parameter tables, the user tier then the expert one by section (docs/node.md holds them
-    between markers; a test compares)."""
+    """The docs' two parameter tables, the user tier then the expert one by section, and the CEM presets
+    (docs/node.md holds them between markers; a test compares)."""
     lines = ["### User parameters", "",
              "What a ROS user sets on a robot; `config/align_node.yaml` holds these alone, at their defaults.", "",
              *_table(user_parameters()), "", "### Expert parameters", "",
              "Every other parameter: declared and settable the same way (a params file, `-p name:=value`), at its "
              "default unless set. By section:"]
     sections = {f.name: f.metadata["help"] for f in fields(AlignerConfig)}
+    own = parameters(NodeConfig())
     groups: dict[str, dict[str, Parameter]] = {}
     for name, p in node_parameters().items():
         if not p.user:
-            groups.setdefault(name.split(".")[0] if "." in name else "", {})[name] = p
+            group = "" if name in own else name.split(".")[0] if "." in name else "pipeline"
+            groups.setdefault(group, {})[name] = p
     for prefix, group in groups.items():
-        title = f"`{prefix}.*`: {sections[prefix]}" if prefix else "the node's own (topics, QoS, outputs)"
+        title = (f"`{prefix}.*`: {sections[prefix]}" if prefix in sections else "the pipeline's own" if prefix
+                 else "the node's own (topics, QoS, outputs)")
         lines += ["", f"#### {title[0].upper()}{title[1:]}", "", *_table(group)]
+    lines += ["", "### CEM presets", "",
+              "`registration.cem_preset` and `recovery.search.refine_preset` name one of these (N candidates, T "
+              "iterations, the first M fusing the after-ICP reward; lattice spacing in units of epsilon; the other "
+              "fields at the paper's defaults, the seed the pipeline's `seed`):", "", *_presets_table()]
     return "\n".join(lines) + "\n"
 
 

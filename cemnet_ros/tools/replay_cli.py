@@ -12,7 +12,7 @@ warning (the first of each kind) and counted: a line ``skipped 1 of 120 messages
 and summary.json's ``skipped`` / ``skipped_count`` list them; the other scans are processed as without it.
 
     cemnet-replay bags/kitti_00_6scans.mcap --out results/replay/kitti
-    cemnet-replay bags/synthetic_lidar.mcap --registration.cem.n_candidates 300 --limit 8
+    cemnet-replay bags/synthetic_lidar.mcap --registration.cem_preset refine --limit 8
 """
 from __future__ import annotations
 

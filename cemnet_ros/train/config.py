@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from cemnet_ros.core.config import UNSEEDED, CEMConfig
 from cemnet_ros.eval.protocol import ProtocolConfig
-from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig, odometry_registration
+from cemnet_ros.pipeline.config import PreprocessConfig, RecoveryConfig, TrackingEngineConfig
 from cemnet_ros.schema import build, param, section, validate
 
 from .known_motion import KnownMotionConfig
@@ -39,7 +39,7 @@ class ScanPairConfig:
     of ``radius`` metres, roll, pitch and height spread as its default ``recovery.search``).
     """
 
-    n_points: int = param(odometry_registration().n_points, "points per cloud (the node's registration.n_points)",
+    n_points: int = param(TrackingEngineConfig().n_points, "points per cloud (the node's registration.n_points)",
                           low=32)
     consecutive: float = param(0.5, "share of pairs made of two scans (the rest pair a scan with itself)",
                                low=0.0, high=1.0)

@@ -8,7 +8,6 @@ import pytest
 from street_scene import make_transform, make_world, street_scan
 
 from benchmarks.metrics import relative_error, within
-from cemnet_ros.core import CEMConfig, EngineConfig
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig, PreprocessConfig, TrackingConfig
 from cemnet_ros.pipeline.errors import ScanRejected
@@ -17,7 +16,7 @@ from cemnet_ros.pipeline.steps.preprocess import robust_radius
 from cemnet_ros.pipeline.steps.registration import Registration
 from cemnet_ros.pipeline.steps.starts import Starts
 
-FAST = AlignerConfig(registration=EngineConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0)))
+DEFAULT = AlignerConfig()  # the node's defaults (the tracking CEM preset)
 WORLD = make_world()
 PERIOD = 100_000_000
 
@@ -34,7 +33,7 @@ def step_error(poses, steps, k, j=None):
 
 
 def test_first_scan_starts_the_map_and_the_first_pair_runs_the_global_search():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [np.eye(4), make_transform(yaw=0.03, t=(0.6, 0.1, 0.0))]
     first, second = drive(aligner, poses)
     assert first.accepted and first.relative is None and not first.recovered
@@ -46,7 +45,7 @@ def test_first_scan_starts_the_map_and_the_first_pair_runs_the_global_search():
 
 
 def test_first_pair_survives_a_large_motion():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [np.eye(4), make_transform(yaw=np.radians(140.0), t=(3.0, -2.0, 0.0))]
     steps = drive(aligner, poses)
     trans, rot = step_error(poses, steps, 1)
@@ -54,7 +53,7 @@ def test_first_pair_survives_a_large_motion():
 
 
 def test_sequential_tracking_follows_known_motion_and_the_spread_adapts():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
     steps = drive(aligner, poses)
     assert all(s.accepted for s in steps), [s.reason for s in steps]
@@ -63,7 +62,7 @@ def test_sequential_tracking_follows_known_motion_and_the_spread_adapts():
         trans, rot = step_error(poses, steps, k)
         assert trans < 0.02 and rot < 0.1, (k, trans, rot)
         assert 0.5 < steps[k].fitness <= 1.0
-    assert aligner._spread.spread()[1] < FAST.adaptive.initial_translation  # a good prediction narrows it
+    assert aligner._spread.spread()[1] < DEFAULT.adaptive.initial_translation  # a good prediction narrows it
 
 
 def sampled_and_searched(monkeypatch, aligner, poses):
@@ -93,7 +92,7 @@ def sampled_and_searched(monkeypatch, aligner, poses):
 
 
 def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_the_prediction_from_afar(monkeypatch):
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
     poses.append(poses[-1] @ make_transform(yaw=-0.06, t=(0.1, -0.4, 0.0)))  # the prediction is 0.6 m / 4.6 deg off
     steps, events = sampled_and_searched(monkeypatch, aligner, poses)
@@ -110,7 +109,7 @@ def test_a_steady_drive_is_tracked_by_the_polished_prediction_and_a_jerk_by_the_
 def test_a_wobbling_turn_beyond_the_fine_reach_stands_on_the_prediction_from_afar_without_the_cem(monkeypatch):
     yaws = np.cumsum([0.0] + [0.12 * (-1) ** (k // 2) for k in range(9)])  # 7 deg turns, reversing every 2nd
     poses = [make_transform(yaw=yaw, t=(0.4 * k, 0.05 * k, 0.0)) for k, yaw in enumerate(yaws)]
-    steps, events = sampled_and_searched(monkeypatch, ScanAligner(FAST), poses)
+    steps, events = sampled_and_searched(monkeypatch, ScanAligner(DEFAULT), poses)
     assert all(s.accepted for s in steps), [s.reason for s in steps]
     # once the wobble is the prediction's usual error, its GICP basin stage lands on an answer covering the scan
     assert events[4:] == [()] * 6 and all(s.origin == "prediction" for s in steps[4:])
@@ -119,7 +118,7 @@ def test_a_wobbling_turn_beyond_the_fine_reach_stands_on_the_prediction_from_afa
 
 
 def test_without_local_first_the_cem_samples_on_every_tracked_step(monkeypatch):
-    config = dataclasses.replace(FAST, tracking=TrackingConfig(local_first=False))
+    config = dataclasses.replace(DEFAULT, tracking=TrackingConfig(local_first=False))
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(6)]
     steps, events = sampled_and_searched(monkeypatch, ScanAligner(config), poses)
     assert all(s.accepted for s in steps) and all(e[:1] == ("cem",) for e in events[2:])
@@ -139,7 +138,7 @@ def test_a_step_covariance_is_its_registration_plus_the_previous_pose_error_agai
 
     monkeypatch.setattr(Registration, "register", recorded)
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(4)]
-    steps = drive(ScanAligner(FAST), poses)
+    steps = drive(ScanAligner(DEFAULT), poses)
     assert all(s.accepted for s in steps), [s.reason for s in steps]
     own = [None] + [r.covariance for r in registrations]  # the first scan starts the map: no registration
     np.testing.assert_allclose(steps[1].covariance, own[1])
@@ -149,7 +148,7 @@ def test_a_step_covariance_is_its_registration_plus_the_previous_pose_error_agai
 
 
 def test_a_scan_of_another_place_is_flagged_and_the_prediction_published():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(4)]
     steps = drive(aligner, poses)
     elsewhere = np.random.default_rng(9).uniform(-30, 30, (12000, 3))  # no structure of the map
@@ -163,7 +162,7 @@ def test_a_scan_of_another_place_is_flagged_and_the_prediction_published():
 
 
 def test_a_kidnapped_sensor_is_found_again_within_one_scan():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(4)]
     poses.append(make_transform(yaw=np.radians(70.0), t=(6.0, 4.0, 0.0)))  # teleported
     steps = drive(aligner, poses)
@@ -172,7 +171,7 @@ def test_a_kidnapped_sensor_is_found_again_within_one_scan():
 
 
 def test_a_stop_in_a_stamp_gap_stands_after_the_search_and_so_does_a_jump_beyond_every_start():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(4)]
     poses.append(make_transform(yaw=np.radians(50.0), t=(4.0, 2.0, 0.0)))  # after a second gap: far from both starts
     gap = 2_000_000_000
@@ -187,7 +186,7 @@ def test_a_stop_in_a_stamp_gap_stands_after_the_search_and_so_does_a_jump_beyond
 
 
 def test_a_car_that_keeps_its_speed_through_a_gap_of_a_second_is_tracked_from_the_prediction():
-    config = dataclasses.replace(FAST, recovery=dataclasses.replace(FAST.recovery, radius=3.0))
+    config = dataclasses.replace(DEFAULT, recovery=dataclasses.replace(DEFAULT.recovery, radius=3.0))
     aligner = ScanAligner(config)
     poses = [make_transform(t=(-10.0 + k, 0.0, 0.0)) for k in range(4)]  # 10 m/s at 10 Hz
     poses.append(make_transform(t=(8.0, 0.0, 0.0)))  # 1.5 s later: 15 m on
@@ -198,7 +197,7 @@ def test_a_car_that_keeps_its_speed_through_a_gap_of_a_second_is_tracked_from_th
 
 
 def test_a_request_triggers_the_global_search():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     drive(aligner, [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(3)])
     aligner.request_recovery()
     step = aligner.process(street_scan(WORLD, make_transform(t=(1.5, 0, 0)), np.random.default_rng(4)), 3 * PERIOD)
@@ -206,7 +205,7 @@ def test_a_request_triggers_the_global_search():
 
 
 def test_stamp_backwards_is_refused_once_then_restarts_and_duplicate_is_skipped():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(3)]
     steps = drive(aligner, poses, stamps=[1000 + k * PERIOD for k in range(3)])
     dup = aligner.process(street_scan(WORLD, poses[-1], np.random.default_rng(0)), 1000 + 2 * PERIOD)
@@ -220,7 +219,7 @@ def test_stamp_backwards_is_refused_once_then_restarts_and_duplicate_is_skipped(
 
 
 def test_too_few_points_is_rejected_without_touching_the_state():
-    aligner = ScanAligner(dataclasses.replace(FAST, checks=InputChecksConfig(min_count_ratio=0.0)))
+    aligner = ScanAligner(dataclasses.replace(DEFAULT, checks=InputChecksConfig(min_count_ratio=0.0)))
     drive(aligner, [np.eye(4)])
     size = len(aligner.local_map)
     with pytest.raises(ScanRejected, match="too few points"):
@@ -232,7 +231,7 @@ def test_too_few_points_is_rejected_without_touching_the_state():
 
 
 def test_a_rejected_first_cloud_does_not_fix_the_scale():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     two_spots = np.repeat([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], 30, axis=0)  # 60 points, 2 voxels
     with pytest.raises(ScanRejected, match="after preprocessing"):
         aligner.process(two_spots, 0)
@@ -252,13 +251,13 @@ def _tiny_start_then(aligner, poses):
 
 def test_a_tiny_first_scan_is_replaced_by_the_first_representative_one():
     poses = [make_transform(t=(0.5 * k, 0, 0)) for k in range(4)]
-    steps, errors = _tiny_start_then(ScanAligner(FAST), poses)
+    steps, errors = _tiny_start_then(ScanAligner(DEFAULT), poses)
     assert [kind for kind, _ in steps[0].warnings] == ["implausible_start"]
     assert all(s.accepted for s in steps[1:]) and max(errors) < 0.05
 
 
 def test_a_lost_trajectory_measures_the_auto_scale_again():
-    config = dataclasses.replace(FAST, checks=InputChecksConfig(min_count_ratio=0.0))  # no count check
+    config = dataclasses.replace(DEFAULT, checks=InputChecksConfig(min_count_ratio=0.0))  # no count check
     aligner = ScanAligner(config)
     poses = [make_transform(t=(0.5 * k, 0, 0)) for k in range(config.recovery.restart_after + 4)]
     steps, errors = _tiny_start_then(aligner, poses)
@@ -277,7 +276,7 @@ def corridor_points(rng, n=12000, half_length=40.0):
 
 
 def test_corridor_steps_are_flagged_degenerate_and_their_covariance_grows_along_it():
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     rng = np.random.default_rng(0)
     steps = [aligner.process(corridor_points(rng), k * PERIOD) for k in range(5)]
     later = steps[2:]
@@ -299,7 +298,7 @@ def test_config_validation():
 def test_pair_alignment_recovers_the_relative_pose_from_no_guess():
     rng = np.random.default_rng(3)
     source_pose = make_transform(yaw=1.2, t=(2.0, -1.0, 0.0))
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     target = street_scan(WORLD, np.eye(4), rng)
     step = aligner.align_pair(street_scan(WORLD, source_pose, rng), target, 0)
     assert step.recovered and step.accepted, step.reason
@@ -313,7 +312,7 @@ def test_pair_alignment_recovers_the_relative_pose_from_no_guess():
 def test_pair_mode_checks_both_clouds_and_a_refused_one_changes_nothing():
     rng = np.random.default_rng(4)
     source_pose = make_transform(yaw=0.3, t=(1.0, 0.5, 0.0))
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     target = street_scan(WORLD, np.eye(4), rng)
     t0 = 100 * PERIOD
     first = aligner.align_pair(street_scan(WORLD, source_pose, rng), target, t0, source_frame="lidar",
@@ -343,8 +342,8 @@ def test_a_prediction_off_the_map_is_searched_where_the_map_grew_never_an_except
     """2 m a scan towards the world's edge, then 5 s without scans while the sensor moved 1 m: the constant
     velocity predicts 10 m further, beyond the map (a short CEM radius: 4 m). That raised in the lattice (an
     empty map sample); the global search now starts where the map last grew."""
-    config = dataclasses.replace(FAST, preprocess=dataclasses.replace(FAST.preprocess, cem_radius=0.2),
-                                 recovery=dataclasses.replace(FAST.recovery, radius=1.0))
+    config = dataclasses.replace(DEFAULT, preprocess=dataclasses.replace(DEFAULT.preprocess, cem_radius=0.2),
+                                 recovery=dataclasses.replace(DEFAULT.recovery, radius=1.0))
     rng = np.random.default_rng(5)
     aligner = ScanAligner(config)
     first = make_transform(t=(10.0, 0.0, 0.0))
@@ -367,7 +366,7 @@ def test_a_replay_gives_the_same_trajectory_every_time_and_with_any_thread_count
     poses.append(make_transform(yaw=np.radians(80.0), t=(5.0, 3.0, 0.0)))  # a kidnap: the global search runs
 
     def trajectory():
-        return np.array([s.pose for s in drive(ScanAligner(FAST), poses)])
+        return np.array([s.pose for s in drive(ScanAligner(DEFAULT), poses)])
 
     first = trajectory()
     np.testing.assert_array_equal(trajectory(), first)
@@ -397,12 +396,12 @@ def test_a_scan_processed_behind_gets_the_effort_share_of_the_polish_and_search_
 
     monkeypatch.setattr(polish, "point_to_plane_icp", icp)
     monkeypatch.setattr(metric_cem, "global_search", search)
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(DEFAULT)
     poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(3)]
     rng = np.random.default_rng(2)
     steps = [aligner.process(street_scan(WORLD, p, rng), k * PERIOD, effort=e) for k, (p, e)
              in enumerate(zip(poses, (1.0, 0.5, 1.0)))]
     assert [s.effort for s in steps] == [1.0, 0.5, 1.0] and all(s.accepted for s in steps)
-    full, half = FAST.polish.iters, round(0.5 * FAST.polish.iters)
-    assert budgets["search"] == [FAST.recovery.search.n_scatter // 2]  # the first pair ran behind
+    full, half = DEFAULT.polish.iters, round(0.5 * DEFAULT.polish.iters)
+    assert budgets["search"] == [DEFAULT.recovery.search.n_scatter // 2]  # the first pair ran behind
     assert set(budgets["polish"]) == {full, half}

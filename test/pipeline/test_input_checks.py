@@ -4,7 +4,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from cemnet_ros.core import CEMConfig, EngineConfig
 from cemnet_ros.data.scenes import LidarModel, courtyard_scene, raycast, synthetic_trajectory
 from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig
@@ -167,7 +166,6 @@ def test_an_out_of_order_stamp_is_refused_and_a_confirmed_step_back_passes():
 
 # -- organised clouds through the aligner: a holed scan after clean ones aligns as its finite points do --------
 
-FAST = AlignerConfig(registration=EngineConfig(cem=CEMConfig(n_candidates=100, n_iters=3, n_fused_iters=0)))
 OS0 = LidarModel(n_beams=64, n_azimuth=180, elevation_deg=(-45.0, 45.0))  # 90 deg up and down: much open sky
 HOLED = 3  # the index of the scan with holes in the stream
 
@@ -222,7 +220,7 @@ ENCODINGS = {"organised_nan": lambda p: p, "interleaved_nan": _interleaved, "is_
 
 def _steps(scans, holed):
     """Each scan's step from a fresh aligner: the scans' finite points, the HOLED one as ``holed``."""
-    aligner = ScanAligner(FAST)
+    aligner = ScanAligner(AlignerConfig())
     clouds = [holed if k == HOLED else _finite_rows(scan) for k, scan in enumerate(scans)]
     return [aligner.process(cloud, k * PERIOD, frame_id="lidar") for k, cloud in enumerate(clouds)]
 

@@ -11,7 +11,7 @@ from cemnet_ros.pipeline.steps.starts import turns
 
 def test_the_turns_span_the_yaws_and_tilts_about_the_pose_and_keep_its_position():
     T_last = make_transform(yaw=0.7, t=(4.0, -2.0, 1.0))
-    turned = turns(T_last, RecoveryConfig(turn_yaw=90.0, turn_step=30.0, turn_tilt=20.0))
+    turned = turns(T_last, RecoveryConfig(turn_yaw_deg=90.0, turn_step_deg=30.0, turn_tilt_deg=20.0))
     assert len(turned) == 7 * 5 - 1  # yaws -90..90 in 30 deg, each level and tilted 4 ways; the pose itself not
     for T in turned:
         np.testing.assert_allclose(T[:3, 3], T_last[:3, 3])
@@ -24,5 +24,5 @@ def test_the_turns_span_the_yaws_and_tilts_about_the_pose_and_keep_its_position(
 
 def test_no_turns_when_disabled_and_yaw_only_without_tilt():
     T_last = make_transform(yaw=0.2)
-    assert turns(T_last, RecoveryConfig(turn_yaw=0.0)) == []
-    assert len(turns(T_last, RecoveryConfig(turn_yaw=60.0, turn_step=30.0, turn_tilt=0.0))) == 4
+    assert turns(T_last, RecoveryConfig(turn_yaw_deg=0.0)) == []
+    assert len(turns(T_last, RecoveryConfig(turn_yaw_deg=60.0, turn_step_deg=30.0, turn_tilt_deg=0.0))) == 4

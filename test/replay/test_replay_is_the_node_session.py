@@ -10,7 +10,7 @@ from cemnet_ros.runtime.aligner_session import AlignerSession
 from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.tools.replay_cli import configure, parse_args, replay
 
-PARAMETERS = {"registration.cem.n_candidates": 200, "registration.cem.n_iters": 4,
+PARAMETERS = {"registration.cem_preset": "refine", "seed": 3,
               "base_to_sensor": (0.3, -0.1, 1.7, 0.01, -0.02, 0.5)}
 UNTIMED = ("index", "latency_s")  # the bag's message index (the session is not told it) and the wall clock
 

@@ -16,7 +16,7 @@ from cemnet_ros.replay.trajectory import absolute_trajectory_error
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.tools.replay_cli import main
 
-SMALL_CEM = ["--registration.cem.n_candidates", "200", "--registration.cem.n_iters", "4"]
+PIPELINE = ["--seed", "1", "--recovery.search.refine_preset", "tracking"]  # both runs' (one from a file, one flag)
 T_BASE_LIDAR = (0.2, 0.0, 1.5, 0.0, 0.0, 0.0)  # the /tf_static of the test bag (copied, not used)
 EXTRINSIC = (0.3, -0.1, 1.7, 0.01, -0.02, 0.5)
 
@@ -72,7 +72,7 @@ def tf_static_bag(tiny_bag, tmp_path_factory) -> Path:
 def live_replay(tf_static_bag, tmp_path_factory) -> Path:
     """cemnet-replay with the node's default output parameters."""
     out = tmp_path_factory.mktemp("replay") / "live"
-    assert main([str(tf_static_bag), "--out", str(out), "--quiet", "--no-plot", *SMALL_CEM]) == 0
+    assert main([str(tf_static_bag), "--out", str(out), "--quiet", "--no-plot", *PIPELINE]) == 0
     return out
 
 
@@ -131,10 +131,10 @@ def test_replay_node_parameters_from_config_and_flags(tiny_bag, live_replay, tmp
     params = tmp_path / "node.yaml"
     params.write_text("/**:\n  ros__parameters:\n    odom_frame: map\n    base_frame: from_file\n"
                       f"    base_to_sensor: {list(EXTRINSIC)}\n    covariance_mode: fixed\n"
-                      "    input_topic: ignored_offline\n    registration.cem.n_iters: 4\n")
+                      "    input_topic: ignored_offline\n    seed: 1\n")
     out = tmp_path / "out"
     assert main([str(tiny_bag), "--out", str(out), "--quiet", "--no-plot", "--config", str(params),
-                 "--registration.cem.n_candidates", "200", "--base_frame", "robot", "--invert_tf", "true",
+                 "--recovery.search.refine_preset", "tracking", "--base_frame", "robot", "--invert_tf", "true",
                  "--fixed_position_variance", "0.04", "--publish_aligned_cloud", "true",
                  "--aligned_cloud_voxel", "0.5"]) == 0
     got = _raw_messages(out / "replay.mcap")
@@ -156,6 +156,7 @@ def test_replay_node_parameters_from_config_and_flags(tiny_bag, live_replay, tmp
     # TUM file and ATE are the base frame's (what is published).
     summary = json.loads((out / "summary.json").read_text())
     assert summary["frames"]["base_frame"] == "robot" and summary["node_config"]["invert_tf"] is True
+    assert (summary["config"]["seed"], summary["config"]["recovery"]["search"]["refine_preset"]) == (1, "tracking")
     _, est = read_tum(out / "trajectory_tum.txt")
     _, gt = read_tum(out / "ground_truth_tum.txt")
     np.testing.assert_allclose(est, [_pose_of(o.pose.pose) for o in odom], atol=1e-6)

@@ -18,7 +18,7 @@ from cemnet_ros.runtime.extrinsic import pose_msg_to_matrix
 from cemnet_ros.tools.replay_cli import main
 
 STAMP0, PERIOD = 1_700_000_000_000_000_000, 100_000_000
-SMALL_CEM = ["--registration.cem.n_candidates", "100", "--registration.cem.n_iters", "2", "--quiet", "--no-plot"]
+QUIET = ["--quiet", "--no-plot"]
 N_VALID = 5
 SCANS = [scenes.lidar_scan(scenes.courtyard_scene(), pose, scenes.LidarModel(n_beams=16, n_azimuth=360),
                            np.random.default_rng(k)) for k, pose in enumerate(scenes.synthetic_trajectory(N_VALID))]
@@ -89,7 +89,7 @@ def runs(tmp_path_factory) -> dict:
     assert _write(root / "clean.mcap", bad, with_bad=False) == stamps
     out = {"stamps": stamps, "bad_slots": bad}
     for name in ("clean", "bad"):
-        assert main([str(root / f"{name}.mcap"), "--out", str(root / name), *SMALL_CEM]) == 0
+        assert main([str(root / f"{name}.mcap"), "--out", str(root / name), *QUIET]) == 0
         out[name] = json.loads((root / name / "summary.json").read_text())
         out[f"{name}_odometry"] = _odometry(root / name / "replay.mcap")
     return out
@@ -126,7 +126,7 @@ def test_valid_poses_equal_those_of_the_clean_bag(runs):
 def test_skips_warned_once_per_kind_and_summarised(tmp_path, capsys):
     bag = tmp_path / "two_truncated.mcap"
     _write(bag, {1: "truncated", 3: "truncated", 4: "empty"})
-    assert main([str(bag), "--out", str(tmp_path / "out"), *SMALL_CEM]) == 0
+    assert main([str(bag), "--out", str(tmp_path / "out"), *QUIET]) == 0
     captured = capsys.readouterr()
     warnings = [line for line in captured.err.splitlines() if "warning: skipped" in line]
     assert len(warnings) == 2 and "[truncated]" in warnings[0] and "[empty]" in warnings[1]
@@ -140,7 +140,7 @@ def test_only_bad_messages_exit_1_with_the_count(tmp_path, capsys):
         conn = writer.add_connection("/points", POINTCLOUD2, typestore=TYPESTORE)
         for k, kind in enumerate(("truncated", "empty")):
             writer.write(conn, STAMP0 + k, BAD[kind](STAMP0 + k))
-    assert main([str(bag), "--out", str(tmp_path / "out"), *SMALL_CEM]) == 1
+    assert main([str(bag), "--out", str(tmp_path / "out"), *QUIET]) == 1
     assert "no scan could be processed (skipped 2 of 2 messages: 1 truncated" in capsys.readouterr().err
 
 

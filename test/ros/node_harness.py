@@ -29,8 +29,7 @@ from cemnet_ros.ros.align_node import AlignNode  # noqa: E402
 from cemnet_ros.ros.outputs import TFMessage  # noqa: E402
 from cemnet_ros.runtime.extrinsic import pose_from_xyz_rpy  # noqa: E402
 
-FAST = {"registration.cem.n_candidates": 300, "registration.cem.n_iters": 6, "qos_reliability": "reliable",
-        "queue_size": 10, "publish_aligned_cloud": True}
+HARNESS_PARAMETERS = {"qos_reliability": "reliable", "queue_size": 10, "publish_aligned_cloud": True}
 FIRST_TIMEOUT = 120.0  # the first registration loads the engine (a cold machine, a busy one: minutes)
 
 WORLD = make_world()
@@ -96,7 +95,7 @@ class Harness:
     """An align_node plus a probe node (publishers, subscribers, reset client) spinning in one background thread."""
 
     def __init__(self, context, namespace, overrides, input_topics=("points",), target_latched=None):
-        params = [Parameter(k, value=v) for k, v in {**FAST, **overrides}.items()]
+        params = [Parameter(k, value=v) for k, v in {**HARNESS_PARAMETERS, **overrides}.items()]
         self.node = AlignNode(context=context, namespace=namespace, parameter_overrides=params)
         self.probe = rclpy.create_node("probe", namespace=namespace, context=context)
         self.odometry, self.poses, self.clouds, self.diagnostics, self.logs, self.tfs = [], [], [], [], [], []

@@ -17,7 +17,17 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from lifecycle_msgs.msg import Transition, TransitionEvent  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
-from node_harness import EXTRINSIC, FAST, FIRST_TIMEOUT, POSES, StandInBuffer, pose_of, scan_msg, transform, wait_for  # noqa: E402
+from node_harness import (  # noqa: E402
+    EXTRINSIC,
+    FIRST_TIMEOUT,
+    HARNESS_PARAMETERS,
+    POSES,
+    StandInBuffer,
+    pose_of,
+    scan_msg,
+    transform,
+    wait_for,
+)
 from rcl_interfaces.srv import GetParameters  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -34,7 +44,7 @@ class Managed:
     """An align_lifecycle_node and a probe (lifecycle clients, the scan publisher, an odometry subscriber)."""
 
     def __init__(self, context, namespace, overrides=None):
-        params = [Parameter(k, value=v) for k, v in {**FAST, **(overrides or {})}.items()]
+        params = [Parameter(k, value=v) for k, v in {**HARNESS_PARAMETERS, **(overrides or {})}.items()]
         self.node = AlignLifecycleNode(context=context, namespace=namespace, parameter_overrides=params)
         self.probe = rclpy.create_node("lifecycle_probe", namespace=namespace, context=context)
         ns = f"/{namespace}/align_node"

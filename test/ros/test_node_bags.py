@@ -25,10 +25,7 @@ def test_replay_bag_over_dds(harness_factory, bag):
     from cemnet_ros.replay.trajectory import absolute_trajectory_error
 
     clouds, truth = read_bag(bag)
-    from cemnet_ros.pipeline.config import AlignerConfig
-    cem = AlignerConfig().registration.cem
-    h = harness_factory({"registration.cem.n_candidates": cem.n_candidates,  # the node's default CEM
-                         "registration.cem.n_iters": cem.n_iters})
+    h = harness_factory({})  # the node's default CEMs
     estimates, started = [], time.monotonic()
     for k, (ns, raw) in enumerate(clouds):
         odom = h.send(raw, timeout=FIRST_TIMEOUT if k < 2 else 120.0)

@@ -26,7 +26,8 @@ def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_n
     assert set(params) == set(user)
     assert all(params[n] == (list(p.default) if p.kind is tuple else p.default) for n, p in user.items())
     changed = tmp_path / "robot.yaml"
-    changed.write_text("/**:\n  ros__parameters:\n    registration.cem.n_iters: 7\n    base_frame: robot1/base\n")
+    changed.write_text("/**:\n  ros__parameters:\n    registration.cem_preset: paper\n    seed: 7\n"
+                       "    base_frame: robot1/base\n")
     node = AlignNode(context=context, cli_args=["--ros-args", "-r", "__ns:=/robot1", "-r", "__node:=lidar_odom",
                                                 "--params-file", str(path), "--params-file", str(changed)])
     try:
@@ -34,10 +35,12 @@ def test_params_file_is_the_schema_and_applies_under_a_namespace_and_a_renamed_n
         assert all(node.has_parameter(name) for name in node_parameters()), "expert ones stay declared"
         defaults = node_parameters()  # an expert parameter the file leaves out keeps the schema's default
         assert node.get_parameter("health.min_fitness").value == defaults["health.min_fitness"].default
-        assert node.get_parameter("registration.cem.n_iters").value == 7
+        assert node.get_parameter("registration.cem_preset").value == "paper"
         assert node.get_parameter("mode").value == "sequential"
-        cem = node._session.config.registration.cem  # the parameters reach the pipeline's config
-        assert (cem.n_iters, cem.n_candidates) == (7, defaults["registration.cem.n_candidates"].default)
+        pipeline = node._session.config  # the parameters reach the pipeline's config and its engines
+        engine, search = pipeline.tracking_engine(), pipeline.global_search()
+        assert (engine.cem.n_candidates, engine.cem.n_iters, engine.cem.seed, engine.seed) == (1000, 10, 7, 7)
+        assert (search.refine.n_iters, search.refine.seed) == (5, 7)  # the refinement's preset kept
         assert node.alignment._cfg.base_frame == "robot1/base"
         result = node.set_parameters([Parameter("registration.n_points", value=100)])[0]  # read-only
         assert not result.successful

@@ -23,8 +23,7 @@ def test_replay_without_matplotlib_writes_everything_but_the_figure(tiny_bag, tm
     for name in ("matplotlib", "matplotlib.figure"):
         monkeypatch.setitem(sys.modules, name, None)  # as on a headless robot without python3-matplotlib
     out = tmp_path / "out"
-    assert main([str(tiny_bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "100",
-                 "--registration.cem.n_iters", "2"]) == 0
+    assert main([str(tiny_bag), "--out", str(out), "--quiet"]) == 0
     assert not (out / "replay.png").exists()
     assert (out / "trajectory_tum.txt").is_file() and "plot" not in json.loads((out / "summary.json").read_text())[
         "outputs"]
@@ -32,10 +31,10 @@ def test_replay_without_matplotlib_writes_everything_but_the_figure(tiny_bag, tm
     assert "replay.png not written" in err and "python3-matplotlib" in err and "--no-plot" in err, err
 
 
-def test_replay_tiny_bag_small_cem(tiny_bag, tmp_path, capsys):
+def test_replay_tiny_bag_with_a_cem_preset(tiny_bag, tmp_path, capsys):
     out = tmp_path / "out"
-    rc = main([str(tiny_bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "200",
-               "--registration.cem.n_iters", "4", "--publish_aligned_cloud", "true"])
+    rc = main([str(tiny_bag), "--out", str(out), "--quiet", "--registration.cem_preset", "refine",
+               "--publish_aligned_cloud", "true"])
     assert rc == 0
     report = capsys.readouterr().out
     assert "ATE RMSE" in report and "RPE translation" in report and "latency p50" in report
@@ -44,7 +43,7 @@ def test_replay_tiny_bag_small_cem(tiny_bag, tmp_path, capsys):
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary left behind
     summary = json.loads((out / "summary.json").read_text())
     assert summary["scans"] == 4 and summary["accuracy"]["matched"] == 4
-    assert summary["config"]["registration"]["cem"]["n_candidates"] == 200
+    assert summary["config"]["registration"]["cem_preset"] == "refine"
     # ~0.7 m and ~3 deg per scan: dead reckoning with identity would be off by 70 cm per pair.
     for pair in summary["accuracy"]["per_pair"]:
         assert pair["trans_m"] < 0.05 and pair["rot_deg"] < 0.5, pair
@@ -73,7 +72,7 @@ def test_a_realtime_replay_drops_what_the_node_queue_would_and_scores_what_came_
     out = tmp_path / "live"
     # 10000x: the 4 scans arrive within 0.04 ms, so the first one's registration holds up the others; a queue
     # of 2 keeps the newest two, and the first of them starts behind the last
-    assert main([str(tiny_bag), "--out", str(out), "--quiet", "--no-plot", "--registration.cem.n_candidates", "100",
+    assert main([str(tiny_bag), "--out", str(out), "--quiet", "--no-plot",
                  "--realtime", "10000", "--queue_size", "2", "--behind_effort", "0.25"]) == 0
     assert "live at 10000x" in capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
@@ -91,8 +90,7 @@ def test_replay_without_ground_truth_reports_speed_only(tmp_path, capsys):
         for i in range(3):
             writer.write_cloud("/cloud", base + [0.1 * i, 0, 0], "cam", 10**18 + i * 10**8)
     out = tmp_path / "out"
-    assert main([str(bag), "--out", str(out), "--quiet", "--limit", "2", "--registration.cem.n_candidates", "100",
-                 "--registration.cem.n_iters", "2", "--no-plot"]) == 0
+    assert main([str(bag), "--out", str(out), "--quiet", "--limit", "2", "--no-plot"]) == 0
     report = capsys.readouterr().out
     assert "speed only" in report and "ATE" not in report
     summary = json.loads((out / "summary.json").read_text())
@@ -109,9 +107,7 @@ def test_replay_reports_rejected_scans_and_goes_on(tmp_path, capsys):
             cloud = base[:10] if i == 1 else base + [0.1 * i, 0, 0]
             writer.write_cloud("/cloud", cloud, "cam", 10**18 + i * 10**8)
     out = tmp_path / "out"
-    assert main([str(bag), "--out", str(out), "--quiet", "--registration.cem.n_candidates", "100",
-                 "--registration.cem.n_iters", "2",
-                 "--no-plot"]) == 0
+    assert main([str(bag), "--out", str(out), "--quiet", "--no-plot"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["scans"] == 3
     assert [r["index"] for r in summary["rejected"]] == [1] and "10" in summary["rejected"][0]["reason"]
@@ -153,11 +149,11 @@ def build_config(values):
 
 def test_config_yaml_ros_format_and_overrides(tmp_path):
     cfg_file = tmp_path / "p.yaml"
-    cfg_file.write_text("/**:\n  ros__parameters:\n    registration.cem.n_candidates: 321\n    registration:\n"
-                        "      cem: {n_iters: 2}\n    preprocess.voxel_size: 0.3\n    tracking.centre: identity\n"
-                        "    registration.weights: ''\n    input_topic: points\n")
+    cfg_file.write_text("/**:\n  ros__parameters:\n    registration.cem_preset: paper\n    recovery:\n"
+                        "      search: {refine_preset: tracking}\n    preprocess.voxel_size: 0.3\n"
+                        "    tracking.centre: identity\n    registration.weights: ''\n    input_topic: points\n")
     config = build_config(load_params(cfg_file))
-    assert config.registration.cem.n_candidates == 321 and config.registration.cem.n_iters == 2
+    assert config.registration.cem_preset == "paper" and config.recovery.search.refine_preset == "tracking"
     assert config.preprocess.voxel_size == 0.3 and config.tracking.centre == "identity"
     assert config.registration.weights == ""
     with pytest.raises(ValueError, match="tracking.centre must be one of"):

@@ -84,12 +84,12 @@ class MetricEngine:
         sensor's displacement; ``map_voxel``: the map's voxel (the scan is thinned alike, :func:`search_source`)."""
         rec = self.config.recovery
         units = EngineUnits(frame, T_guess[:3, 3])
-        seed = max(self.config.registration.seed, 0)
+        seed = max(self.config.seed, 0)
         source = units.points(apply_transform(T_guess, search_source(frame, map_voxel, rec.points, seed)))
         target = units.points(target_m)
         prior = self._network_prior(source, target)
         hypotheses = global_search(source, target, np.zeros(6), rec.radius / frame.scale,
-                                   lean_search(rec.search, effort), seed=seed, prior=prior)
+                                   lean_search(self.config.global_search(), effort), seed=seed, prior=prior)
         best = hypotheses[0].fitness if hypotheses else 0.0
         return [units.pose_in_metres(h.T_target_source) @ T_guess for h in hypotheses
                 if h.fitness >= POLISH_FRACTION * best]

@@ -42,14 +42,14 @@ Stage = Callable[[Contest], None]
 
 
 def turns(T_pose: np.ndarray, config: RecoveryConfig) -> list[np.ndarray]:
-    """``T_pose`` turned about its own z axis by every ``recovery.turn_step`` up to ``recovery.turn_yaw`` either
-    way, each also tilted by ``recovery.turn_tilt`` either way about its x and about its y axis (``T_pose`` itself
-    excluded; none when ``turn_yaw`` is 0)."""
-    if config.turn_yaw <= 0.0:
+    """``T_pose`` turned about its own z axis by every ``recovery.turn_step_deg`` up to ``recovery.turn_yaw_deg``
+    either way, each also tilted by ``recovery.turn_tilt_deg`` either way about its x and about its y axis
+    (``T_pose`` itself excluded; none when ``turn_yaw_deg`` is 0)."""
+    if config.turn_yaw_deg <= 0.0:
         return []
-    n = int(config.turn_yaw // config.turn_step)
-    yaws = np.radians(config.turn_step) * np.arange(-n, n + 1)
-    tilt = np.radians(config.turn_tilt)
+    n = int(config.turn_yaw_deg // config.turn_step_deg)
+    yaws = np.radians(config.turn_step_deg) * np.arange(-n, n + 1)
+    tilt = np.radians(config.turn_tilt_deg)
     tilts = [(0.0, 0.0)] + ([(tilt, 0.0), (-tilt, 0.0), (0.0, tilt), (0.0, -tilt)] if tilt > 0.0 else [])
     out = []
     for yaw in yaws:
