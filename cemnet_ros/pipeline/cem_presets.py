@@ -5,32 +5,34 @@ training) keep every field.
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, NamedTuple
+import dataclasses
+from typing import Callable, NamedTuple
 
-from cemnet_ros.core.config import CEMConfig
+from cemnet_ros.core.config import CEMConfig, GlobalSearchConfig
 
 
 class CEMPreset(NamedTuple):
-    """A named CEM: the :class:`CEMConfig` fields it sets (the others keep the paper's defaults) and its use."""
+    """A named CEM: what makes its :class:`CEMConfig` (the fields it does not set keep the paper's defaults) and
+    its use."""
 
-    fields: Mapping[str, Any]
+    make: Callable[[], CEMConfig]
     purpose: str
 
 
 CEM_PRESETS: dict[str, CEMPreset] = {
-    "tracking": CEMPreset({"n_candidates": 100, "n_iters": 2, "n_fused_iters": 0, "lattice_spacing": 0.5},
+    "tracking": CEMPreset(lambda: CEMConfig(n_candidates=100, n_iters=2, n_fused_iters=0, lattice_spacing=0.5),
                           "tracking around the motion prediction: a short search, without the after-ICP reward, "
                           "on a lattice of epsilon / 2 (the polish against the map gives the precision, the "
                           "global search is the wide one)"),
-    "refine": CEMPreset({"n_candidates": 100, "n_iters": 5, "n_fused_iters": 2},
+    "refine": CEMPreset(lambda: GlobalSearchConfig().refine,
                         "refining each hypothesis of the global search: longer, with the after-ICP reward in its "
                         "first two iterations (a hypothesis starts farther off than a prediction)"),
-    "paper": CEMPreset({}, "the paper's CEM, cemnet-register's and cemnet-eval's default: to compare the pipeline "
-                       "with the method alone (50x the tracking preset's samples)"),
+    "paper": CEMPreset(CEMConfig, "the paper's CEM, cemnet-register's and cemnet-eval's default: to compare the "
+                       "pipeline with the method alone (50x the tracking preset's samples)"),
 }
 CEM_PRESET_NAMES = tuple(CEM_PRESETS)
 
 
 def cem_preset(name: str, seed: int) -> CEMConfig:
     """A fresh :class:`CEMConfig` of preset ``name`` sampling with ``seed`` (-1 = unseeded)."""
-    return CEMConfig(**CEM_PRESETS[name].fields, seed=seed)
+    return dataclasses.replace(CEM_PRESETS[name].make(), seed=seed)

@@ -247,6 +247,12 @@ class AlignerConfig:
     def __post_init__(self) -> None:
         validate(self)
 
+    @property
+    def draw_seed(self) -> int:
+        """The seed of the pipeline's own draws (the scan's and the map's subsets, the search's scatter): ``seed``,
+        0 when unseeded."""
+        return max(self.seed, 0)
+
     def tracking_engine(self) -> EngineConfig:
         """The tracking CEM's engine config (its preset, the pipeline's seed)."""
         return self.registration.engine(self.seed)

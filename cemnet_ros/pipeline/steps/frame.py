@@ -140,7 +140,7 @@ class Preprocessor:
         voxel = voxel_size(cfg, scale)
         dense = voxel_cloud(points, cfg, voxel)
         near = near_points(dense, cfg, scale)
-        seed = max(self.config.seed, 0)
+        seed = self.config.draw_seed
         return Frame(dense, subsample(dense, self.config.polish.points, "random", seed),
                      subsample(near, self.config.registration.n_points, cfg.sampling, seed), near, scale, voxel)
 

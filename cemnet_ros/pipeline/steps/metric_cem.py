@@ -84,7 +84,7 @@ class MetricEngine:
         sensor's displacement; ``map_voxel``: the map's voxel (the scan is thinned alike, :func:`search_source`)."""
         rec = self.config.recovery
         units = EngineUnits(frame, T_guess[:3, 3])
-        seed = max(self.config.seed, 0)
+        seed = self.config.draw_seed
         source = units.points(apply_transform(T_guess, search_source(frame, map_voxel, rec.points, seed)))
         target = units.points(target_m)
         prior = self._network_prior(source, target)

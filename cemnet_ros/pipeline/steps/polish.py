@@ -30,7 +30,7 @@ def map_sample(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_gues
                margin: float = 0.0) -> np.ndarray:
     """``n`` map points within the CEM's radius (+ ``margin`` m) of the guessed sensor position."""
     radius = config.preprocess.cem_radius * frame.scale + margin
-    return target_map.sample(n, T_guess[:3, 3], radius, seed=max(config.seed, 0))
+    return target_map.sample(n, T_guess[:3, 3], radius, seed=config.draw_seed)
 
 
 class Polisher:
