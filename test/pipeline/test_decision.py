@@ -29,8 +29,8 @@ def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, condit
 
 
 def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", moving=True,
-             missing="", seen_through=lambda answer: 0.0) -> Evidence:
-    expectation = Expectation(at(0.0), NEAR, level, because, moving)
+             missing="", seen_through=lambda answer: 0.0, reach=np.inf) -> Evidence:
+    expectation = Expectation(at(0.0), NEAR, level, because, moving, reach)
     return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}),
                        seen_through=seen_through, searched=searched, neighbours_checked=neighbours,
                        missing=missing)
@@ -103,6 +103,22 @@ def test_a_weakly_constrained_view_waits_for_its_neighbours():
     weak = answer(conditioning=(RULES.min_conditioning + RULES.neighbour_conditioning) / 2, explained=True)
     assert decide(evidence(weak), RULES).needs == Needs.NEIGHBOURS
     assert decide(evidence(weak, neighbours=True), RULES).outcome == Outcome.ACCEPTED
+
+
+def test_an_answer_beyond_the_polish_reach_of_the_predicted_position_waits_for_its_neighbours():
+    slid = answer(x=0.3, explained=True)  # within the prediction's spread, but beyond a 0.2 m reach
+    waiting = decide(evidence(slid, reach=0.2), RULES)
+    assert waiting.outcome == Outcome.UNSETTLED and waiting.needs == Needs.NEIGHBOURS
+    assert "predicted position" in waiting.reason
+    assert decide(evidence(slid, reach=0.2, neighbours=True), RULES).outcome == Outcome.ACCEPTED
+    assert decide(evidence(slid, reach=0.5), RULES).outcome == Outcome.ACCEPTED  # within reach: no neighbours
+    # A first pair predicts no position: nothing to slide from.
+    first = decide(evidence(answer(x=3.0), level=None, searched=True, moving=False, reach=0.2), RULES)
+    assert first.needs != Needs.NEIGHBOURS
+    # Back at the predicted position, a distinct answer about as consistent makes the slide a near-tie.
+    back = answer(x=0.0, fitness=LEVEL - 0.01, origin=Origin.NEIGHBOUR)
+    tie = decide(evidence(slid, back, reach=0.2, neighbours=True, searched=True), RULES)
+    assert tie.outcome == Outcome.NEAR_TIE
 
 
 def test_the_leader_among_near_ties_is_the_one_nearest_the_prediction_and_its_rival_the_best_other():

@@ -22,9 +22,9 @@ def stages(monkeypatch):
     record = {"ran": [], "cem_at": at(0.0), "hypotheses": []}
 
     def stage(name, body):
-        def run(self, contest, *args):
+        def run(self, contest, *args, **kwargs):
             record["ran"].append(name)
-            body(self, contest, *args)
+            body(self, contest, *args, **kwargs)
         monkeypatch.setattr(Starts, name, run)
 
     def search(self, contest):
@@ -63,7 +63,8 @@ def test_an_answer_the_prediction_does_not_expect_waits_for_the_search(stages):
     stages["cem_at"] = at(1.4)  # the prediction's basin fits poorly; the CEM finds one 1.5 m away
     stages["hypotheses"] = [at(-3.0)]
     registered = register(Landscape(Basin(at(0.05), 0.3), Basin(at(1.5), 0.8), Basin(at(-3.0), 0.5)))
-    assert stages["ran"] == ["prediction", "prediction_from_afar", "cem", "last_pose", "search"]
+    # 1.5 m off the predicted position, beyond the polish's reach: its rotation there competes last (and fits 0.3).
+    assert stages["ran"] == ["prediction", "prediction_from_afar", "cem", "last_pose", "search", "neighbours"]
     assert registered.verdict.outcome == Outcome.ACCEPTED and registered.searched
     assert registered.why_searched.startswith("tracking failed (unconfirmed")
     np.testing.assert_allclose(registered.answer, at(1.5))
@@ -84,6 +85,20 @@ def test_a_weak_view_has_its_neighbours_polished_once(stages):
     better = register(Landscape(Basin(at(0.0), 0.8), Basin(at(0.0, 1.5), 0.95), conditioning=weak))
     assert stages["ran"] == ["prediction", "neighbours"] and better.verdict.outcome == Outcome.ACCEPTED
     np.testing.assert_allclose(better.T_odom_sensor, at(0.0, 1.5))
+
+
+def test_an_answer_that_slid_from_the_predicted_position_competes_with_its_rotation_there(stages):
+    turned = 20.0  # deg: the prediction's rotation is off (a handheld turn), its position is not
+    stages["cem_at"] = at(1.5, turned)  # the CEM lands in a slid basin: the right rotation, 1.5 m along
+    right, slid = Basin(at(0.0, turned), 0.9), Basin(at(1.5, turned), 0.8)
+    registered = register(Landscape(right, slid), credible=False)
+    assert stages["ran"][-1] == "neighbours" and registered.verdict.outcome == Outcome.ACCEPTED
+    np.testing.assert_allclose(registered.T_odom_sensor, at(0.0, turned))
+    assert Origin.NEIGHBOUR in registered.evidence.support
+    stages["ran"].clear()
+    as_good = register(Landscape(Basin(at(0.0, turned), 0.79), slid), credible=False)
+    # The scene cannot tell them apart: flagged (ambiguous: the prediction's rotation is near neither).
+    assert not as_good.verdict.vouched and "distinct answers" in as_good.verdict.reason
 
 
 def test_no_answer_anywhere_fails_with_the_reason_and_a_wide_covariance(stages, monkeypatch):

@@ -80,6 +80,6 @@ class Contest:
     def evidence(self, near: tuple[float, float], level: Optional[float], rules: HealthConfig,
                  search_because: str = "", moving: bool = True) -> Evidence:
         """The record the decision reads (:class:`~.evidence.Evidence`)."""
-        expectation = Expectation(self.T_predicted, near, level, search_because, moving)
+        expectation = Expectation(self.T_predicted, near, level, search_because, moving, self.polisher.reach)
         return Evidence.of(self.answers, expectation, rules, support=self.support, seen_through=self.seen_through,
                            searched=self.searched, neighbours_checked=self.neighbours_checked, missing=self.missing)

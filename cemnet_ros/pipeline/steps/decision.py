@@ -18,11 +18,15 @@ the map's last scan saw empty have not competed (:mod:`.evidence`).
    after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where no
    motion is known yet (a first pair), when the search found no near-tie; and then at least as much of the scan
    must lie on the map's surfaces as off the map (consistency >= 0).
-5. **Degenerate**: an answer that stands on that evidence but whose view leaves a direction unconstrained
+5. **Displaced**: an answer that stands on that evidence but lies farther from the predicted position than the
+   fine polish reaches (along a known motion) waits for its neighbours: its own rotation at the predicted
+   position competes. A slide along a weakly constrained direction keeps the right rotation (3-5 m on Livox
+   keyframes, with the right turn); a right answer that far off a poor prediction still leads.
+6. **Degenerate**: an answer that stands on that evidence but whose view leaves a direction unconstrained
    (conditioning below ``min_conditioning``): flagged, the prediction kept along that direction.
-6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
+7. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
    flat valley) waits for its rotational neighbours to compete (a near-tie then flags it, rule 3).
-7. Otherwise: *accepted*.
+8. Otherwise: *accepted*.
 """
 from __future__ import annotations
 
@@ -106,6 +110,9 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         if level is None and leader.consistency < 0.0:
             return Verdict(Outcome.FAILED, f"unconfirmed: {why}, more of the scan off the map "
                                            f"({1 - leader.coverage:.3f}) than on its surfaces ({leader.fitness:.3f})")
+    if evidence.displaced and not evidence.neighbours_checked:
+        return Verdict(Outcome.UNSETTLED, f"{evidence.offset[0]:.2f} m from the predicted position",
+                       Needs.NEIGHBOURS)
     if leader.signals.conditioning < rules.min_conditioning:
         return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
                                            "prediction kept along the unconstrained direction")

@@ -43,6 +43,7 @@ class Expectation:
     level: Optional[float]  # the running fitness of the vouched steps (None: none yet, e.g. the first pair)
     search_because: str = ""  # why the global search must compete whatever the answers ("": only if they need it)
     moving: bool = True  # the prediction extrapolates a motion (False: a first pair, a new target: none known)
+    reach: float = np.inf  # m: how far the fine polish reaches; a leader farther from the predicted position slid
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,13 @@ class Evidence:
         """The prediction expects the leader (see the module)."""
         assert self.leader is not None
         return self.leader.explained or Origin.PREDICTION in self.support or self.near
+
+    @property
+    def displaced(self) -> bool:
+        """The leader lies farther from the predicted position than the fine polish reaches, along a known motion:
+        its rotation at the predicted position has a basin of its own to check (a slide along a weakly
+        constrained direction keeps the right rotation)."""
+        return self.expectation.moving and self.offset[0] > self.expectation.reach
 
     @property
     def margin(self) -> float:

@@ -81,7 +81,8 @@ class Registration:
         while verdict is None or verdict.outcome not in EARLY:
             if verdict is not None and verdict.needs == Needs.NEIGHBOURS:
                 assert evidence is not None and evidence.leader is not None  # a verdict that needs them has one
-                starts.neighbours(contest, evidence.leader.T_odom_sensor)
+                starts.neighbours(contest, evidence.leader, turned=evidence.leader.signals.conditioning
+                                  < self.config.health.neighbour_conditioning, at_prediction=evidence.displaced)
             elif stages:
                 if verdict is not None and not why and stages[0] == starts.search:
                     why = f"tracking failed ({verdict.reason})"

@@ -17,7 +17,8 @@ decision settles (steps 3 and 5 of the recipe in :mod:`..aligner`).
    sparse scans, where the prediction, and the search around its tilt, are lost; the wide polish reaches the
    truth from a start within about 15 deg of it;
 7. **the leader's neighbours** (on demand): the leading answer turned by the fine polish's reach either way about
-   the sensor's z axis, where its view is weakly constrained (a flat valley of a narrow field of view).
+   the sensor's z axis, where its view is weakly constrained (a flat valley of a narrow field of view), and its
+   rotation at the predicted position, where it lies beyond the fine polish's reach of it (a slide).
 
 With ``tracking.local_first`` false the CEM comes first (the method alone), before 2 and 4. A step the caller
 sends to the search (the first pair, after a failed step, on request) skips 1 and 3.
@@ -31,7 +32,7 @@ import numpy as np
 from cemnet_ros.core.geometry import turned_in_place
 from cemnet_ros.pipeline.config import AlignerConfig, RecoveryConfig
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
-from cemnet_ros.pipeline.steps.answer import Origin
+from cemnet_ros.pipeline.steps.answer import Answer, Origin
 from cemnet_ros.pipeline.steps.contest import Contest
 from cemnet_ros.pipeline.steps.metric_cem import MetricEngine
 from cemnet_ros.pipeline.steps.polish import map_sample
@@ -143,9 +144,17 @@ class Starts:
             for T_turned in turns(self.T_last, self.config.recovery):
                 contest.enter(T_turned, Origin.TURN, wide=True)
 
-    def neighbours(self, contest: Contest, T_leader: np.ndarray) -> None:
-        """The leader turned by the fine polish's reach either way about the sensor's z axis."""
-        reach = contest.polisher.reach_rad
-        for sign in (1.0, -1.0):
-            contest.enter(turned_in_place(T_leader, np.array([sign * reach, 0.0, 0.0])), Origin.NEIGHBOUR)
+    def neighbours(self, contest: Contest, leader: Answer, *, turned: bool, at_prediction: bool) -> None:
+        """The leader's neighbours: ``turned`` by the fine polish's reach either way about the sensor's z axis (a
+        weakly constrained view), and ``at_prediction``: its rotation at the predicted position (a leader that
+        slid beyond the fine polish's reach of it)."""
+        T_leader = leader.T_odom_sensor
+        if turned:
+            reach = contest.polisher.reach_rad
+            for sign in (1.0, -1.0):
+                contest.enter(turned_in_place(T_leader, np.array([sign * reach, 0.0, 0.0])), Origin.NEIGHBOUR)
+        if at_prediction:
+            T_moved = T_leader.copy()
+            T_moved[:3, 3] = contest.T_predicted[:3, 3]
+            contest.enter(T_moved, Origin.NEIGHBOUR)
         contest.neighbours_checked = True
