@@ -131,6 +131,12 @@ def parameters(config: Any, exclude: Iterable[str] = (), prefix: str = "") -> di
     return out
 
 
+def fields_of(config: Any, cls: type) -> dict[str, Any]:
+    """The values of the fields ``cls`` declares, taken from ``config`` (a ``cls`` or a subclass): what builds a
+    ``cls``, or a sibling subclass, from it."""
+    return {f.name: getattr(config, f.name) for f in dataclasses.fields(cls)}
+
+
 def values(config: Any, exclude: Iterable[str] = ()) -> dict[str, Any]:
     """The values in force, by dotted name (e.g. to log them at start-up)."""
     return {name: _get(config, name) for name in parameters(config, exclude)}

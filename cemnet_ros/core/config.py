@@ -1,11 +1,10 @@
 """Typed configuration of the CEMNet engine, with the paper's defaults (fields documented for the schema)."""
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
-from cemnet_ros.schema import param, section, validate
+from cemnet_ros.schema import fields_of, param, section, validate
 
 Six = Tuple[float, float, float, float, float, float]
 UNSEEDED = -1  # a seed field's value for fresh randomness on every run
@@ -94,7 +93,7 @@ class RegistrationConfig(EngineConfig):
     @classmethod
     def of(cls, engine: EngineConfig, prior: str) -> RegistrationConfig:
         """``engine``'s settings with the initial distribution from ``prior`` ('network' or 'identity')."""
-        return cls(**{f.name: getattr(engine, f.name) for f in dataclasses.fields(EngineConfig)}, prior=prior)
+        return cls(**fields_of(engine, EngineConfig), prior=prior)
 
 
 @dataclass

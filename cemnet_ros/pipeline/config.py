@@ -10,12 +10,11 @@ stand for come from :meth:`AlignerConfig.tracking_engine` and :meth:`AlignerConf
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 from cemnet_ros.core.config import EngineConfig, GlobalSearchConfig, NetworkConfig, SearchScatterConfig
 from cemnet_ros.pipeline.cem_presets import CEM_PRESET_NAMES, cem_preset
-from cemnet_ros.schema import param, section, validate
+from cemnet_ros.schema import fields_of, param, section, validate
 
 SAMPLING_METHODS = ("random", "farthest")
 TRACKING_CENTRES = ("motion", "network", "identity")
@@ -32,8 +31,7 @@ class TrackingEngineConfig(NetworkConfig):
 
     def engine(self, seed: int) -> EngineConfig:
         """The engine's config: these settings, the preset's CEM, ``seed`` for its sub-sampling and its CEM."""
-        network = {f.name: getattr(self, f.name) for f in dataclasses.fields(NetworkConfig)}
-        return EngineConfig(**network, cem=cem_preset(self.cem_preset, seed), seed=seed)
+        return EngineConfig(**fields_of(self, NetworkConfig), cem=cem_preset(self.cem_preset, seed), seed=seed)
 
 
 @dataclass
@@ -45,8 +43,7 @@ class RecoverySearchConfig(SearchScatterConfig):
 
     def global_search(self, seed: int) -> GlobalSearchConfig:
         """The core search's config: this scatter, the preset's CEM sampling with ``seed``."""
-        scatter = {f.name: getattr(self, f.name) for f in dataclasses.fields(SearchScatterConfig)}
-        return GlobalSearchConfig(**scatter, refine=cem_preset(self.refine_preset, seed))
+        return GlobalSearchConfig(**fields_of(self, SearchScatterConfig), refine=cem_preset(self.refine_preset, seed))
 
 
 @dataclass

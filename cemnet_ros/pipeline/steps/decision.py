@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cemnet_ros.pipeline.config import HealthConfig
+from cemnet_ros.pipeline.steps.answer import Answer
 from cemnet_ros.pipeline.steps.evidence import Evidence
 
 
@@ -73,6 +74,11 @@ class Verdict:
     def failed(self) -> bool:
         """The answer is not published: the prediction is, flagged."""
         return self.outcome in (Outcome.FAILED, Outcome.AMBIGUOUS, Outcome.UNSETTLED)
+
+
+def weak_view(answer: Answer, rules: HealthConfig) -> bool:
+    """``answer``'s view is weakly constrained (rule 7): its rotational neighbours compete before it stands."""
+    return answer.signals.conditioning < rules.neighbour_conditioning
 
 
 def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
@@ -116,6 +122,6 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
     if leader.signals.conditioning < rules.min_conditioning:
         return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
                                            "prediction kept along the unconstrained direction")
-    if leader.signals.conditioning < rules.neighbour_conditioning and not evidence.neighbours_checked:
+    if weak_view(leader, rules) and not evidence.neighbours_checked:
         return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)
     return Verdict(Outcome.ACCEPTED)

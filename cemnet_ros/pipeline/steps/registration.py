@@ -18,7 +18,7 @@ from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.contest import Contest
 from cemnet_ros.pipeline.steps.covariance import covariance_from_hessian, flat_covariance, keep_prediction_along
-from cemnet_ros.pipeline.steps.decision import Needs, Outcome, Verdict, decide
+from cemnet_ros.pipeline.steps.decision import Needs, Outcome, Verdict, decide, weak_view
 from cemnet_ros.pipeline.steps.evidence import Evidence
 from cemnet_ros.pipeline.steps.frame import Frame
 from cemnet_ros.pipeline.steps.health import disagreement
@@ -81,8 +81,8 @@ class Registration:
         while verdict is None or verdict.outcome not in EARLY:
             if verdict is not None and verdict.needs == Needs.NEIGHBOURS:
                 assert evidence is not None and evidence.leader is not None  # a verdict that needs them has one
-                starts.neighbours(contest, evidence.leader, turned=evidence.leader.signals.conditioning
-                                  < self.config.health.neighbour_conditioning, at_prediction=evidence.displaced)
+                starts.neighbours(contest, evidence.leader, turned=weak_view(evidence.leader, self.config.health),
+                                  at_prediction=evidence.displaced)
             elif stages:
                 if verdict is not None and not why and stages[0] == starts.search:
                     why = f"tracking failed ({verdict.reason})"
