@@ -12,7 +12,7 @@ from cemnet_ros.io.console import log
 THREADS = 2  # every method's thread count (numba's, small_gicp's num_threads, KISS-ICP's max_num_threads)
 OURS = "ours"
 NEIGHBOURS = 20  # small_gicp's default k for its normals and covariances
-CONVERGENCE = 1e-4  # a step smaller than this (rad and m) ends a polish: point_to_plane_icp's default
+CONVERGENCE = 1e-4  # a step moving the points less than this (m) ends a polish: point_to_plane_icp's default
 PEER_MODULES = {"small_gicp": ("small_gicp",),
                 "kiss_icp": ("kiss_icp.voxelization", "kiss_icp.mapping", "kiss_icp.registration")}
 

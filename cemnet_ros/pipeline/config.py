@@ -181,8 +181,8 @@ class MapConfig:
 class PolishConfig:
     """The point-to-plane polish against the map, and the fitness it is judged by."""
 
-    iters: int = param(20, "point-to-plane polish iterations (at most: it stops once a step moves less than "
-                       "0.1 mm and 0.1 mrad)", low=1)
+    iters: int = param(20, "point-to-plane polish iterations (at most: it stops once a step moves the scan less "
+                       "than a hundredth of a frame voxel)", low=1)
     points: int = param(3000, "source points the polish uses at most (a seeded subset of the voxel cloud)", low=10)
     coarse_stride: int = param(3, "the polish's first steps use every this-many-th point, the last ones and the "
                                "Hessian all (1 = all throughout)", low=1)

@@ -1,8 +1,9 @@
 """A scan as small_gicp aligns it: thinned to a voxel, with each point's covariance and a KD-tree (metres).
 
 The map keeps its last scan so (:attr:`~.voxel_map.VoxelMap.last_scan`), the target of the polish's basin stage
-(:mod:`cemnet_ros.pipeline.steps.basin`). Single-threaded on purpose: small_gicp splits its parallel work
-dynamically, so its rounding, and with it the trajectory, would change with the machine's load.
+(:mod:`cemnet_ros.pipeline.steps.basin`). The thinning and the alignment run single-threaded on purpose: small_gicp
+splits their parallel sums dynamically, so their rounding, and with it the trajectory, would change with the
+machine's load. Each point's covariance depends on its neighbours only, so those are estimated in parallel.
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 import small_gicp
 
 THREADS = 1  # deterministic sums (see above)
+COVARIANCE_THREADS = 2  # per point: the same result on any number of threads
 NEIGHBOURS = 10  # points of each local distribution (small_gicp's default)
 GICP_VOXELS = 2.0  # map voxels: the clouds GICP aligns are this coarse (it finds a basin; the fine polish refines)
 
@@ -32,6 +34,8 @@ class GicpCloud:
 
 def gicp_cloud(points: np.ndarray, voxel: float) -> GicpCloud:
     """``points`` (n, 3) thinned to ``voxel`` (m), with covariances from their ``NEIGHBOURS`` nearest."""
-    cloud, tree = small_gicp.preprocess_points(np.ascontiguousarray(points, dtype=np.float64), float(voxel),
-                                               num_neighbors=NEIGHBOURS, num_threads=THREADS)
+    cloud = small_gicp.voxelgrid_sampling(np.ascontiguousarray(points, dtype=np.float64), float(voxel),
+                                          num_threads=THREADS)
+    tree = small_gicp.KdTree(cloud, num_threads=COVARIANCE_THREADS)
+    small_gicp.estimate_covariances(cloud, tree, num_neighbors=NEIGHBOURS, num_threads=COVARIANCE_THREADS)
     return GicpCloud(cloud, tree)

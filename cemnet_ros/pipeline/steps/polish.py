@@ -23,6 +23,7 @@ from cemnet_ros.pipeline.steps.health import disagreement
 from cemnet_ros.pipeline.steps.refine import PolishResult, point_to_plane_icp
 
 FINE_DISTANCE = 2.0  # frame voxels: the fine polish's pairing distance, and its reach
+FINE_SETTLED = 0.01  # frame voxels: the fine polish ends once a step moves the scan less (far below its noise)
 BASIN_SETTLED = 0.1  # frame voxels: the basin stage ends once a step moves less (the fine polish does the rest)
 
 
@@ -59,6 +60,7 @@ class Polisher:
     def fine(self, T_start: np.ndarray) -> PolishResult:
         """Point to plane from ``T_start`` with every polish point, pairs within :attr:`reach`."""
         return point_to_plane_icp(self.map, self.frame.polish, T_start, self.reach, self.iters,
+                                  convergence=FINE_SETTLED * self.frame.polish_voxel,
                                   coarse_stride=self.config.polish.coarse_stride)
 
     def basin(self, T_start: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ N_CHUNKS = 32  # partial sums; a fixed count: the sums do not depend on the thre
 N_SUMS = 30  # 21 upper-triangle entries of J^T W J, 6 of J^T W r, sum w r^2, sum w, pairs
 UPPER = np.triu_indices(6)  # the kernel's order of the J^T W J entries
 DAMPING = 1e-12  # relative to trace(H): keeps the solve defined along an exactly degenerate direction
-COARSE_CONVERGENCE = 100.0  # the subset's steps end once one moves less than this x the convergence threshold (1 cm)
+COARSE_CONVERGENCE = 10.0  # the subset's steps end once one moves the points less than this x ``convergence``
 
 
 @dataclass
@@ -115,8 +115,8 @@ def point_to_plane_icp(target: VoxelMap, source: np.ndarray, initial: np.ndarray
                        convergence: float = 1e-4, coarse_stride: int = 1) -> PolishResult:
     """Refine ``initial`` (4x4, source -> target map) by at most ``iters`` Gauss-Newton point-to-plane steps.
 
-    Stops early once a step moves less than ``convergence`` (rad and m); with fewer than ``min_pairs`` pairs
-    the estimate stays. ``kernel_scale`` (m) of the Geman-McClure weights defaults to max_distance / 3.
+    Stops early once a step moves the source less than ``convergence`` m (its translation plus its rotation
+    times the source's RMS range); with fewer than ``min_pairs`` pairs the estimate stays. ``kernel_scale`` (m) of the Geman-McClure weights defaults to max_distance / 3.
     ``coarse_stride`` > 1: the steps run on every that-many-th point until one moves less than
     ``COARSE_CONVERGENCE`` x ``convergence``, then on all (the far steps need no more points than the direction
     takes; the last ones and the Hessian use them all). The Hessian, variance and pair count are those of the
@@ -132,13 +132,14 @@ def point_to_plane_icp(target: VoxelMap, source: np.ndarray, initial: np.ndarray
     coarse = coarse_stride > 1 and len(source) >= coarse_stride * max(min_pairs, 1)
     points = np.ascontiguousarray(source[::coarse_stride]) if coarse else source
     hessian, gradient, variance, n_pairs = _linearise(target, points, rot, trans, max_distance, kernel_scale)
+    lever = float(np.sqrt(np.mean(np.einsum("ij,ij->i", source, source)))) if len(source) else 0.0
     done = 0
     while done < iters and n_pairs >= max(min_pairs, 1):
         delta = np.linalg.solve(hessian + DAMPING * np.trace(hessian) * np.eye(6), -gradient)
         rot = _exp_so3(delta[:3]) @ rot
         trans = trans + delta[3:]
         done += 1
-        step = max(np.linalg.norm(delta[:3]), np.linalg.norm(delta[3:]))
+        step = float(np.linalg.norm(delta[3:]) + lever * np.linalg.norm(delta[:3]))
         if coarse and (step < COARSE_CONVERGENCE * convergence or done == iters):
             coarse, points = False, source
         hessian, gradient, variance, n_pairs = _linearise(target, points, rot, trans, max_distance, kernel_scale)
