@@ -116,7 +116,8 @@ def point_to_plane_icp(target: VoxelMap, source: np.ndarray, initial: np.ndarray
     """Refine ``initial`` (4x4, source -> target map) by at most ``iters`` Gauss-Newton point-to-plane steps.
 
     Stops early once a step moves the source less than ``convergence`` m (its translation plus its rotation
-    times the source's RMS range); with fewer than ``min_pairs`` pairs the estimate stays. ``kernel_scale`` (m) of the Geman-McClure weights defaults to max_distance / 3.
+    times the source's RMS range); with fewer than ``min_pairs`` pairs the estimate stays. ``kernel_scale`` (m)
+    of the Geman-McClure weights defaults to max_distance / 3.
     ``coarse_stride`` > 1: the steps run on every that-many-th point until one moves less than
     ``COARSE_CONVERGENCE`` x ``convergence``, then on all (the far steps need no more points than the direction
     takes; the last ones and the Hessian use them all). The Hessian, variance and pair count are those of the
