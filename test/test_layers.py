@@ -14,7 +14,7 @@ LAYERS = [
     ("cemnet_ros.schema", "cemnet_ros.io"),
     ("cemnet_ros.core",),
     ("cemnet_ros.point_times", "cemnet_ros.pointcloud2", "cemnet_ros.pipeline.cem_presets",
-     "cemnet_ros.pipeline.config", "cemnet_ros.pipeline.errors"),
+     "cemnet_ros.pipeline.config", "cemnet_ros.pipeline.errors", "cemnet_ros.pipeline.threads"),
     ("cemnet_ros.pipeline.map",),
     ("cemnet_ros.pipeline.steps",),
     ("cemnet_ros.pipeline.aligner", "cemnet_ros.pipeline.pair_mode"),

@@ -50,6 +50,7 @@ from cemnet_ros.pipeline.steps.metric_cem import MetricEngine, prior_registrar
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
 from cemnet_ros.pipeline.steps.registration import Registered, Registration
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
+from cemnet_ros.pipeline.threads import bound_threads
 
 
 class ScanAligner:
@@ -130,6 +131,7 @@ class ScanAligner:
         polishes' and the global search's budgets (a live node behind its input; offline replays use 1).
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
+        bound_threads(self.config.threads)
         admitted = self._checks.admit(points, point_times, stamp_ns, frame_id, now_ns)
         if admitted.restart:
             self.reset(self._pose)
@@ -268,5 +270,6 @@ class ScanAligner:
                    target_frame: str = "", target_stamp_ns: Optional[int] = None, now_ns: Optional[int] = None
                    ) -> AlignmentStep:
         """Pair mode (:class:`~.pair_mode.PairMode`): the pose of ``source`` in the frame of ``target``."""
+        bound_threads(self.config.threads)
         return self._pairs.align(source, target, stamp_ns, source_frame=source_frame, target_frame=target_frame,
                                  target_stamp_ns=target_stamp_ns, now_ns=now_ns)

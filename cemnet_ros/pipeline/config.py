@@ -231,6 +231,8 @@ class AlignerConfig:
 
     seed: int = param(0, "seed of the pipeline's random draws (the scan's and the map's subsets, the global "
                       "search, both CEMs); -1 = the tracking CEM samples unseeded, the rest keeps seed 0", low=-1)
+    threads: int = param(0, "threads of every pool a scan runs on (numba's kernels, torch, small_gicp's covariances): "
+                         "a robot's spare cores; 0 = all the machine's", low=0, user=True)
     checks: InputChecksConfig = section(InputChecksConfig, "plausibility checks a scan passes first")
     preprocess: PreprocessConfig = section(PreprocessConfig, "what of a scan is used")
     registration: TrackingEngineConfig = section(TrackingEngineConfig, "the tracking CEM and its network")

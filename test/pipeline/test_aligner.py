@@ -405,3 +405,31 @@ def test_a_scan_processed_behind_gets_the_effort_share_of_the_polish_and_search_
     full, half = DEFAULT.polish.iters, round(0.5 * DEFAULT.polish.iters)
     assert budgets["search"] == [DEFAULT.recovery.search.n_scatter // 2]  # the first pair ran behind
     assert set(budgets["polish"]) == {full, half}
+
+
+def test_threads_bounds_the_kernels_of_the_calling_thread_and_leaves_the_trajectory_as_it_is(monkeypatch):
+    """``threads: 1`` (a robot's one spare core): numba runs the scan's kernels on one thread, the GICP clouds'
+    covariances too, and every pose is the one all cores give (the kernels' sums are chunked, not per thread)."""
+    import numba
+    import torch
+
+    from cemnet_ros.pipeline import threads
+    from cemnet_ros.pipeline.map import gicp_cloud
+
+    poses = [make_transform(yaw=0.02 * k, t=(0.5 * k, 0.05 * k, 0.0)) for k in range(4)]
+    seen = []
+    original = gicp_cloud.small_gicp.estimate_covariances
+
+    def estimate_covariances(*args, **kwargs):
+        seen.append(kwargs["num_threads"])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(gicp_cloud.small_gicp, "estimate_covariances", estimate_covariances)
+    one = drive(ScanAligner(dataclasses.replace(DEFAULT, threads=1)), poses)
+    assert numba.get_num_threads() == torch.get_num_threads() == 1 and set(seen) == {1}, seen
+    every = drive(ScanAligner(DEFAULT), poses)
+    assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
+    assert torch.get_num_threads() == threads.TORCH_THREADS
+    for a, b in zip(one, every):
+        np.testing.assert_array_equal(a.pose, b.pose)
+        assert a.accepted == b.accepted
