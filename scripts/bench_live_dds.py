@@ -10,6 +10,7 @@ steps off of what came out (scan_status OK = accepted), as scripts/bench_live.py
 
     python scripts/bench_live_dds.py --balm DIR --thinned 5000 --rates 1 8
     python scripts/bench_live_dds.py --bag bags/kitti_00_6scans.mcap --rates 1 2
+    python scripts/bench_live_dds.py --bag QUICK_SHACK_BAG --rates 1 --param queue_size:=32 threads:=1
 """
 from __future__ import annotations
 
@@ -84,8 +85,13 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--thinned", type=int, metavar="N", help="BALM thinned to N random points per scan")
     parser.add_argument("--bag", type=Path, help="a bag with ground truth instead of BALM")
     parser.add_argument("--rates", type=float, nargs="+", default=[1.0, 4.0])
+    parser.add_argument("--param", nargs="+", default=[], metavar="NAME:=VALUE",
+                        help="node parameters under test (docs/node.md), as ros2 run's -p takes them")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_live_dds.json")
     args = parser.parse_args(argv)
+    under_test = dict(item.split(":=", 1) for item in args.param if ":=" in item)
+    if len(under_test) != len(args.param):
+        parser.error("--param takes NAME:=VALUE")
     if (args.balm is None) == (args.bag is None):
         parser.error("give --balm DIR or --bag BAG")
     sequence = bag_sequence(args.bag) if args.bag else balm_sequence(args.balm)
@@ -97,13 +103,14 @@ def main(argv: Optional[list[str]] = None) -> int:
     rows = []
     try:
         for rate in args.rates:  # a fresh node per rate: nothing carries over
-            node = start_node(NS, {"qos_reliability": "reliable", "preprocess.max_range": sequence.max_range})
+            node = start_node(NS, {"qos_reliability": "reliable", "preprocess.max_range": sequence.max_range,
+                                   **under_test})
             probe = Probe(NS, reliable=True)
             try:
                 warm_up(probe, msgs[0], node)
                 print(f"[bench_live_dds] {sequence.name} at {rate:g}x ...", file=sys.stderr, flush=True)
-                rows.append({"sequence": sequence.name, "method": "cemnet over DDS", **play(probe, sequence, msgs,
-                                                                                          rate)})
+                method = " ".join(["cemnet over DDS", *args.param])
+                rows.append({"sequence": sequence.name, "method": method, **play(probe, sequence, msgs, rate)})
             finally:
                 probe.close()
                 node.terminate()

@@ -45,8 +45,8 @@ class NodeConfig:
     qos_reliability: str = param("best_effort", "input QoS reliability ('best_effort' = sensor data)",
                                  choices=RELIABILITIES, user=True)
     qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
-    queue_size: int = param(8, "scans waiting for the worker (8 absorb a global search at 20 Hz); when full the "
-                            "oldest is dropped", low=1, high=100)
+    queue_size: int = param(8, "scans waiting for the worker; when full the oldest is dropped (a global search "
+                            "holds the worker 0.3-3 s: docs/live.md)", low=1, high=100)
     behind_effort: float = param(0.5, "share of the polishes' and the global search's budgets a scan gets while "
                                  "newer scans wait (1 = the same as offline)", low=0.05, high=1.0)
     covariance_mode: str = param("registration", "'registration': per step, from the polish's Hessian "
