@@ -24,7 +24,7 @@ from cemnet_ros.runtime.extrinsic import BaseFrame
 from cemnet_ros.schema import build
 
 KEPT = ("ate_m", "end_drift_pct", "off_accepted", "off_flagged", "flagged", "recovered_share", "ms_p50", "ms_p95",
-        "period_ms")
+        "period_ms", "accepted_right", "accepted_wrong", "flagged_right", "flagged_wrong", "accepted_wrong_steps")
 
 
 def live_run(sequence: Sequence, rate: Optional[float], overrides: Optional[Mapping[str, Any]] = None,
@@ -36,20 +36,23 @@ def live_run(sequence: Sequence, rate: Optional[float], overrides: Optional[Mapp
     if session.load() is None:
         raise RuntimeError(session.fatal_error)
     results: dict[int, StepResult] = {}
+    # the period the node's queue receives the scans at (a live scan's budget counts in it)
+    period_s = None if rate is None else float(np.median(np.diff(sequence.stamps_ns))) * 1e-9 / rate
 
-    def handle(k: int, backlog: int) -> None:
+    def handle(k: int, backlog: Optional[int]) -> None:
         scan = SimpleNamespace(points=sequence.scans[k], stamp_ns=sequence.stamps_ns[k], times=None)
         try:
-            step = session.process(scan, "", None, backlog).step
+            step = session.process(scan, "", None, backlog, period_s).step
         except ScanRejected as exc:
             results[k] = StepResult(None, False, False, 0.0, str(exc))
             return
-        results[k] = StepResult(step.pose, step.accepted, step.recovered, 1e3 * step.latency_s, step.reason)
+        results[k] = StepResult(step.pose, step.accepted, step.recovered, 1e3 * step.latency_s, step.reason,
+                                step.answer, step.map_restarted)
 
     indices = range(len(sequence.scans))
     if rate is None:
         for k in indices:
-            handle(k, 0)
+            handle(k, None)
         live = {"scans": len(indices), "processed": len(indices), "dropped": 0, "processed_share": 1.0,
                 "behind": 0}
     else:

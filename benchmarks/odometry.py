@@ -33,16 +33,21 @@ class Output:
 
 class CemnetOdometry:
     """The pipeline under test, through its public interface only: the node's defaults, or those with the dotted
-    parameter ``overrides`` (e.g. ``{"recovery.search.n_scatter": 125}``)."""
+    parameter ``overrides`` (e.g. ``{"recovery.search.n_scatter": 125}``); ``scan_budget`` (periods, 0: none, as
+    offline) bounds each scan as a live node's ``scan_budget`` does, every scan still processed."""
 
-    def __init__(self, max_range: float, overrides: Optional[Mapping[str, Any]] = None) -> None:
+    def __init__(self, max_range: float, overrides: Optional[Mapping[str, Any]] = None,
+                 scan_budget: float = 0.0) -> None:
         from cemnet_ros.pipeline.aligner import AlignerConfig, ScanAligner
         from cemnet_ros.schema import build
 
         self._aligner = ScanAligner(build(AlignerConfig(), overrides or {}))
+        self._scan_budget = scan_budget
 
     def process(self, points: np.ndarray, stamp_ns: int) -> Output:
-        step = self._aligner.process(points, stamp_ns)
+        period_s = self._aligner.period_s
+        budget_s = self._scan_budget * period_s if self._scan_budget > 0.0 and period_s is not None else None
+        step = self._aligner.process(points, stamp_ns, budget_s=budget_s)
         return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason), np.asarray(step.covariance),
                       bool(step.recovered), step.answer, bool(step.map_restarted))
 
@@ -114,9 +119,10 @@ FACTORIES: dict[str, Callable] = {"cemnet": CemnetOdometry, "kiss-icp": KissOdom
 PEER_MODULES = {"kiss-icp": "kiss_icp.kiss_icp", "genz-icp": "genz_icp.genz_icp", "gicp": "small_gicp"}
 
 
-def available_methods(wanted: list[str], overrides: Optional[Mapping[str, Any]] = None) -> dict[str, Callable]:
+def available_methods(wanted: list[str], overrides: Optional[Mapping[str, Any]] = None, scan_budget: float = 0.0
+                      ) -> dict[str, Callable]:
     """The wanted methods, less the peers that do not import (reported on stderr); the pipeline under test with
-    the parameter ``overrides``.
+    the parameter ``overrides`` and a live node's ``scan_budget`` (0: none).
 
     The pipeline under test is always kept: if it cannot even be built, every step counts as failed.
     """
@@ -128,5 +134,6 @@ def available_methods(wanted: list[str], overrides: Optional[Mapping[str, Any]] 
             except ImportError as exc:
                 log(f"{name}: not importable ({exc}); left out (pip install -e .[bench])")
                 continue
-        out[name] = functools.partial(CemnetOdometry, overrides=overrides) if name == "cemnet" else FACTORIES[name]
+        out[name] = functools.partial(CemnetOdometry, overrides=overrides, scan_budget=scan_budget) \
+            if name == "cemnet" else FACTORIES[name]
     return out

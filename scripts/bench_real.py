@@ -20,6 +20,7 @@ writes the JSON atomically.
     python scripts/bench_real.py --real-sets DATA --out results/bench_real.json
     python scripts/bench_real.py --real-sets DATA --sets riverside --stand-ins riverside:2:0 --seeds 0 --pairs 0
     python scripts/bench_real.py --real-sets DATA --methods cemnet --set health.tie_ratio=0.9
+    python scripts/bench_real.py --real-sets DATA --methods cemnet --scan-budget 1 --pairs 0
 """
 from __future__ import annotations
 
@@ -65,6 +66,9 @@ def parse_args(argv: Optional[list[str]]) -> argparse.Namespace:
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="node parameters for the pipeline under test (dotted names)")
+    parser.add_argument("--scan-budget", type=float, default=0.0, metavar="PERIODS",
+                        help="the pipeline under test bounds each scan as a live node's scan_budget does (every scan "
+                             "still processed: what the budget alone changes); default 0: none, as offline")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_real.json")
     args = parser.parse_args(argv)
     if args.no_kitti:
@@ -124,9 +128,9 @@ def main(argv: Optional[list[str]] = None) -> int:
     with reported_errors(PROG) as outcome:
         args = parse_args(argv)
         sequences, real = corpus(args)
-        methods = available_methods(args.methods, args.overrides)
+        methods = available_methods(args.methods, args.overrides, args.scan_budget)
         warm_up(methods)
-        report: dict = {"overrides": args.overrides, "results": {}, "far_pairs": {}}
+        report: dict = {"overrides": args.overrides, "scan_budget": args.scan_budget, "results": {}, "far_pairs": {}}
         for sequence in sequences:
             report["results"].update(run_sequences([sequence], methods))
             write_report(args.out, json_text(report))  # a long run keeps what it measured

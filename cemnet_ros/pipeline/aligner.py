@@ -17,8 +17,9 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    the running fitness level; a failed one is published flagged with the prediction and changes nothing else
    (too many in a row restart the map, where :mod:`.steps.lost_streak` says, and the level with it); a
    degenerate one keeps the prediction along the unconstrained directions, is flagged, and still extends the map;
-   a near-tie is flagged and moves the pose and the level only. The step's covariance is its registration's plus
-   the previous pose's error against the map (:func:`~.steps.covariance.carried_into_step`).
+   a near-tie, or an unconfirmed one (a live scan without time for the search, :mod:`.steps.scan_budget`), is
+   flagged and moves the pose and the level only. The step's covariance is its
+   registration's plus the previous pose's error against the map (:func:`~.steps.covariance.carried_into_step`).
 
 Pair mode (:mod:`.pair_mode`) runs steps 0-4 against a map of the target cloud. Poses are ``T_odom_sensor``;
 odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.
@@ -49,6 +50,7 @@ from cemnet_ros.pipeline.steps.lost_streak import LostStreak
 from cemnet_ros.pipeline.steps.metric_cem import MetricEngine, prior_registrar
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
 from cemnet_ros.pipeline.steps.registration import Registered, Registration
+from cemnet_ros.pipeline.steps.scan_budget import ScanBudget
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
 from cemnet_ros.pipeline.threads import bound_threads
 
@@ -120,7 +122,8 @@ class ScanAligner:
 
     # -- sequential mode ------------------------------------------------------------------------------------
     def process(self, points: np.ndarray, stamp_ns: int, point_times: Optional[np.ndarray] = None,
-                frame_id: str = "", now_ns: Optional[int] = None, effort: float = 1.0) -> AlignmentStep:
+                frame_id: str = "", now_ns: Optional[int] = None, effort: float = 1.0,
+                budget_s: Optional[float] = None) -> AlignmentStep:
         """Register this scan against the local map and accumulate the pose.
 
         The scan first passes the input checks (:mod:`.steps.input_checks`: its non-finite points are dropped;
@@ -128,7 +131,9 @@ class ScanAligner:
         changes nothing. ``point_times``: each point's time (s, relative to
         ``stamp_ns``, aligned with ``points``); with ``config.preprocess.deskew`` the scan is first deskewed
         (:mod:`.steps.sweep`). The pose is the one at ``stamp_ns`` in any case. ``effort`` (0, 1] scales the
-        polishes' and the global search's budgets (a live node behind its input; offline replays use 1).
+        polishes' and the global search's budgets (a live node behind its input; offline replays use 1);
+        ``budget_s``: what the scan may hold the worker for (:mod:`.steps.scan_budget`; None: no bound, as
+        offline).
         """
         start, stamp_ns = time.perf_counter(), int(stamp_ns)
         bound_threads(self.config.threads)
@@ -137,12 +142,25 @@ class ScanAligner:
             self.reset(self._pose)
         points, offset_ns, self._map = self._sweep.deskewed(admitted.points, admitted.times, stamp_ns,
                                                             self._motion.velocity, self._motion.last_stamp, self._map)
-        step = self._process_at(points, stamp_ns + offset_ns, start, effort)
+        step = self._process_at(points, stamp_ns + offset_ns, start, effort, self._budget(start, budget_s))
         self._checks.passed(admitted)
         step.warnings, step.effort = admitted.warnings, effort
         return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._motion.velocity, self._motion.has_velocity)
 
-    def _process_at(self, points: np.ndarray, stamp_ns: int, start: float, effort: float) -> AlignmentStep:
+    @property
+    def period_s(self) -> Optional[float]:
+        """The usual time between the scans' stamps (s; None before two scans)."""
+        period_ns = self._motion.period_ns
+        return None if period_ns is None else period_ns * 1e-9
+
+    def _budget(self, start: float, seconds: Optional[float]) -> Optional[ScanBudget]:
+        """The scan's budget from ``start`` (None: no bound, or a search requested: it runs whatever it costs)."""
+        if seconds is None or self._pending_recovery == "requested":
+            return None
+        return ScanBudget(start, seconds, self._registration.stage_costs)
+
+    def _process_at(self, points: np.ndarray, stamp_ns: int, start: float, effort: float,
+                    budget: Optional[ScanBudget]) -> AlignmentStep:
         """The sequential step with the scan taken at ``stamp_ns`` (its reference time, see :mod:`.steps.sweep`)."""
         frame = self._preprocessor.frame(points)
         last_stamp = self._motion.last_stamp
@@ -154,7 +172,7 @@ class ScanAligner:
         registered = self._registration.register(
             frame, self._map, T_predicted, level=self._level.level, search_because=self._pending_recovery,
             T_last=self._pose, dt_ratio=self._motion.dt_ratio(stamp_ns), effort=effort,
-            moving=self._motion.has_velocity, T_fallback=self._T_odom_last_insert)
+            moving=self._motion.has_velocity, T_fallback=self._T_odom_last_insert, budget=budget)
         return self._commit(frame, stamp_ns, T_predicted, registered, start)
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
@@ -235,8 +253,8 @@ class ScanAligner:
 
     def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, registered: Registered) -> None:
         """A step that is not failed: the fitness level takes it in; the map and the prediction errors a vouched
-        (or degenerate) one, not a near-tie, which moves the pose only (a map grown at a guess would mislead every
-        later scan)."""
+        (or degenerate) one, not a near-tie or an unconfirmed one, which move the pose only (a map grown at a guess
+        would mislead every later scan)."""
         assert self._map is not None  # a step is only committed against the map it was registered on
         self._pending_recovery = ""
         self._failures_in_a_row = 0
@@ -244,7 +262,7 @@ class ScanAligner:
         leader = registered.evidence.leader
         assert leader is not None  # a step that is not failed has an answer
         self._level.accept(leader.fitness)  # near-ties too: equals fit alike, and that is what this scene gives
-        if registered.verdict.outcome == Outcome.NEAR_TIE:
+        if registered.verdict.outcome in (Outcome.NEAR_TIE, Outcome.UNCONFIRMED):
             return
         if not registered.searched:  # a search's guess was no prediction of the motion model
             self._spread.update(np.linalg.inv(T_predicted) @ pose)

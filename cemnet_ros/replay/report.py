@@ -74,7 +74,8 @@ def format_report(bag: str, summary: dict, max_pairs: int = 20, worst: int = 10)
                  f"throughput {sp['throughput_scans_per_s']:.2f} scans/s (wall {sp['wall_s']:.1f} s)")
     live = summary.get("live")
     if live:
-        lines.append(f"live at {live['rate']:g}x the bag's timing (queue of {live['queue_size']}): "
+        lines.append(f"live at {live['rate']:g}x the bag's timing (queue of {live['queue_size']}, scan budget "
+                     f"{live['scan_budget']:g} periods): "
                      f"{live['processed']} of {live['scans']} scans processed, {live['dropped']} dropped, "
                      f"{live['behind']} started behind (effort {live['behind_effort']:g}); latency p50 "
                      f"{live['latency_ms_p50']:.0f} ms, p95 {live['latency_ms_p95']:.0f} ms, "

@@ -11,6 +11,7 @@ that ``configure`` loaded and destroys it on ``deactivate`` (:meth:`Alignment.de
 """
 from __future__ import annotations
 
+import time
 from typing import Any, Optional
 
 import rclpy
@@ -26,6 +27,7 @@ from cemnet_ros.ros.outputs import NodeOutputs
 from cemnet_ros.ros.scans import Incoming, Scan, decode
 from cemnet_ros.ros.services import NodeServices
 from cemnet_ros.runtime.aligner_session import AlignerSession, StepResult
+from cemnet_ros.runtime.arrival_period import ArrivalPeriod
 from cemnet_ros.runtime.extrinsic import BaseFrame, transform_msg_to_matrix
 from cemnet_ros.runtime.extrinsic_hold import ExtrinsicHold
 from cemnet_ros.runtime.node_status import NodeStatus
@@ -59,6 +61,7 @@ class Alignment:
         if tf2_ros is not None:
             self.tf_buffer = tf2_ros.Buffer()
             self._tf_listener = tf2_ros.TransformListener(self.tf_buffer, node)
+        self._arrival_period = ArrivalPeriod()  # the input's period as it arrives: what a scan's budget counts in
         self._worker = BoundedWorker(self._process, maxsize=cfg.queue_size, on_error=self._on_worker_error,
                                      name="cemnet_align")
         self._subscriptions: list = []
@@ -125,6 +128,7 @@ class Alignment:
             return None
 
     def _on_scan(self, payload: bytes) -> None:
+        self._arrival_period.arrived(time.monotonic())
         item = self._incoming(payload, "input")
         if item is not None:
             self._submit(item)
@@ -175,8 +179,8 @@ class Alignment:
         scan = self._decode(item)
         frame_id = scan.msg.header.frame_id
         self._sensor_extrinsic(frame_id)
-        return (self._session.process(scan, frame_id, self._now_ns(), self._worker.stats().depth), scan,
-                self._cfg.odom_frame)
+        return (self._session.process(scan, frame_id, self._now_ns(), self._worker.stats().depth,
+                                      self._arrival_period.seconds), scan, self._cfg.odom_frame)
 
     def _pair(self, source_item: Incoming, target_item: Incoming) -> tuple[StepResult, Scan, str]:
         if self._target is None or self._target[0] is not target_item:  # a latched target is decoded once

@@ -47,6 +47,10 @@ class NodeConfig:
     qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
     queue_size: int = param(8, "scans waiting for the worker; when full the oldest is dropped (a global search "
                             "holds the worker 0.3-3 s: docs/live.md)", low=1, high=100)
+    scan_budget: float = param(2.0, "input periods (the median interval between arriving scans) a scan may hold the "
+                               "worker: the global search and the turns run in it only where what they cost here "
+                               "fits, else its answer is published flagged 'unconfirmed'; 0 = no bound (as offline)",
+                               low=0.0, user=True)
     behind_effort: float = param(0.5, "share of the polishes' and the global search's budgets a scan gets while "
                                  "newer scans wait (1 = the same as offline)", low=0.05, high=1.0)
     covariance_mode: str = param("registration", "'registration': per step, from the polish's Hessian "

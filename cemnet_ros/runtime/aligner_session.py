@@ -108,13 +108,20 @@ class AlignerSession:
         if "relocalize" in requests:
             self._aligner.request_recovery()
 
-    def process(self, scan: Any, frame_id: str, now_ns: Optional[int], backlog: int = 0) -> StepResult:
-        """Sequential mode: register a decoded scan (points, stamp_ns, times) against the map; ``backlog``: newer
-        scans waiting (while behind, a scan gets ``behind_effort`` of the budgets)."""
-        effort = 1.0 if backlog <= 0 else self._output_config.behind_effort
+    def process(self, scan: Any, frame_id: str, now_ns: Optional[int], backlog: Optional[int] = None,
+                period_s: Optional[float] = None) -> StepResult:
+        """Sequential mode: register a decoded scan (points, stamp_ns, times) against the map. ``backlog``: newer
+        scans waiting in a live node's queue (while behind, a scan gets ``behind_effort`` of the budgets), and every
+        live scan ``scan_budget`` x ``period_s`` of the worker's time (the usual time between arrivals; None: between
+        the stamps); ``backlog`` None: offline, the whole plan at full effort."""
+        live = backlog is not None
+        effort = self._output_config.behind_effort if live and backlog else 1.0
         with self._map_lock:
+            period_s = period_s if period_s is not None else self._aligner.period_s
+            budget_s = self._output_config.scan_budget * period_s \
+                if live and period_s is not None and self._output_config.scan_budget > 0.0 else None
             step = self._aligner.process(scan.points, scan.stamp_ns, scan.times, frame_id=frame_id, now_ns=now_ns,
-                                         effort=effort)
+                                         effort=effort, budget_s=budget_s)
         return self._result(step)
 
     def align_pair(self, source: Any, target: Any, source_frame: str, target_frame: str,

@@ -47,7 +47,7 @@ PIPELINE = parameters(AlignerConfig())  # the flags and params-file names it acc
 NODE = {name: p for name, p in parameters(NodeConfig()).items() if name in (
     "odom_frame", "base_frame", "base_to_sensor", "covariance_mode", "fixed_position_variance",
     "fixed_orientation_variance", "publish_tf", "invert_tf", "publish_aligned_cloud", "aligned_cloud_voxel",
-    "queue_size", "behind_effort")}  # the last two: the node's queue, with --realtime
+    "queue_size", "behind_effort", "scan_budget")}  # the last three: the node's queue, with --realtime
 
 
 # ---------------------------------------------------------------------------------------------- config
@@ -93,7 +93,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     p.add_argument("--limit", type=int, default=None, help="process only the first N scans")
     p.add_argument("--realtime", type=float, default=None, metavar="RATE",
                    help="play the scans into the node's queue at RATE x the bag's timing, as a live node would "
-                        "receive them (drops, latency, behind_effort); default: every scan, full effort")
+                        "receive them (drops, latency, behind_effort, scan_budget); default: every scan, its "
+                        "whole plan, full effort")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_arguments(p, NODE, "align_node's output parameters (frames, extrinsic, covariances, /tf, aligned cloud; "
@@ -202,7 +203,8 @@ def build_summary(config: ReplayConfig, facts: dict[str, Any], result: ReplayRes
         "flagged": [{"index": s["index"], "reason": s["reason"]} for s in result.steps
                     if not s["accepted"] or s["reason"]],
         "live": None if result.live is None else {"rate": config.realtime, "queue_size": node.queue_size,
-                                                  "behind_effort": node.behind_effort, **live_summary(result.live)},
+                                                  "behind_effort": node.behind_effort,
+                                                  "scan_budget": node.scan_budget, **live_summary(result.live)},
         "steps": result.steps, "config": asdict(config.pipeline), "node_config": {k: getattr(node, k) for k in NODE},
         "outputs": files,
     }

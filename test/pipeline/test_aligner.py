@@ -185,6 +185,28 @@ def test_a_stop_in_a_stamp_gap_stands_after_the_search_and_so_does_a_jump_beyond
     assert within(*step_error(poses, steps, 4), 0.05, 0.2)
 
 
+def test_a_live_scan_without_time_for_the_search_publishes_its_answer_unconfirmed_and_the_next_tracks_on():
+    aligner = ScanAligner(DEFAULT)
+    poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(4)] + [make_transform(t=(1.5, 0.0, 0.0))]
+    gap = 2_000_000_000  # a stop in a gap: the answer is no prediction's, it waits for the search (as offline)
+    stamps = [0, PERIOD, 2 * PERIOD, 2 * PERIOD + gap, 3 * PERIOD + gap]
+    rng = np.random.default_rng(2)
+    steps = []
+    for k, (pose, stamp) in enumerate(zip(poses, stamps)):
+        if k == 3:
+            map_size = len(aligner.local_map)
+        steps.append(aligner.process(street_scan(WORLD, pose, rng), stamp, budget_s=1e-6 if k > 1 else None))
+        if k == 3:
+            assert len(aligner.local_map) == map_size  # the map waits for a vouched step
+    assert steps[1].recovered and steps[1].accepted  # the first pair's search: its cost is learnt
+    unconfirmed = steps[3]
+    assert unconfirmed.outcome == "unconfirmed" and not unconfirmed.accepted and not unconfirmed.recovered
+    assert "does not fit the scan's budget" in unconfirmed.reason, unconfirmed.reason
+    assert within(*step_error(poses, steps, 3), 0.03, 0.15)  # the answer is published (flagged), not the prediction
+    assert steps[4].accepted and not steps[4].recovered, steps[4].reason  # tracked on from it
+    assert within(*step_error(poses, steps, 4), 0.03, 0.15)
+
+
 def test_a_car_that_keeps_its_speed_through_a_gap_of_a_second_is_tracked_from_the_prediction():
     config = dataclasses.replace(DEFAULT, recovery=dataclasses.replace(DEFAULT.recovery, radius=3.0))
     aligner = ScanAligner(config)

@@ -33,8 +33,10 @@ class FakeAligner:
     def request_recovery(self):
         self.calls.append(("recovery",))
 
-    def process(self, points, stamp_ns, times, *, frame_id, now_ns, effort):
-        self.calls.append(("process", stamp_ns, frame_id, now_ns, effort))
+    period_s = 0.1  # the usual time between the stamps
+
+    def process(self, points, stamp_ns, times, *, frame_id, now_ns, effort, budget_s):
+        self.calls.append(("process", stamp_ns, frame_id, now_ns, effort, budget_s))
         relative = np.linalg.inv(self.pose) @ (self.pose @ MOTION)
         self.pose = self.pose @ MOTION
         flagged = stamp_ns in self.flag_stamps
@@ -77,7 +79,7 @@ def test_steps_publish_the_base_motion_with_the_twist_over_the_stamp_gap():
     first = session.process(_scan(1_000_000_000), "lidar", 5)
     session.begin_scan()
     second = session.process(_scan(1_100_000_000), "lidar", 6)
-    assert session.scale == 0.25 and session._aligner.calls[0] == ("process", 1_000_000_000, "lidar", 5, 1.0)
+    assert session.scale == 0.25 and session._aligner.calls[0] == ("process", 1_000_000_000, "lidar", 5, 1.0, None)
     assert first.out.twist_known is False and second.out.twist_known
     base_motion = T_BASE_SENSOR @ MOTION @ np.linalg.inv(T_BASE_SENSOR)
     np.testing.assert_allclose(second.out.linear, base_motion[:3, 3] / 0.1, atol=1e-9)
@@ -85,14 +87,21 @@ def test_steps_publish_the_base_motion_with_the_twist_over_the_stamp_gap():
     np.testing.assert_allclose(second.out.T_odom_base, base_motion @ base_motion, atol=1e-9)
 
 
-def test_a_scan_that_starts_behind_newer_ones_gets_the_behind_effort():
+def test_a_live_scan_gets_the_scan_budget_and_one_that_starts_behind_newer_ones_the_behind_effort():
     session = _session()
     session.load()
-    for stamp_ns, backlog in ((1_000_000_000, 0), (1_100_000_000, 3), (1_200_000_000, 0)):
+    arrivals = ((1_000_000_000, 0, None), (1_100_000_000, 3, None), (1_200_000_000, 0, 0.05),
+                (1_300_000_000, None, 0.05))
+    for stamp_ns, backlog, period_s in arrivals:
         session.begin_scan()
-        session.process(_scan(stamp_ns), "lidar", None, backlog)
-    efforts = [call[-1] for call in session._aligner.calls]
-    assert efforts == [1.0, NodeConfig().behind_effort, 1.0] and NodeConfig().behind_effort < 1.0
+        session.process(_scan(stamp_ns), "lidar", None, backlog, period_s)
+    efforts = [call[-2] for call in session._aligner.calls]
+    budgets = [call[-1] for call in session._aligner.calls]
+    node = NodeConfig()
+    assert efforts == [1.0, node.behind_effort, 1.0, 1.0] and node.behind_effort < 1.0
+    # the arrivals' period where the caller measured it, else the stamps'; offline (no backlog) no bound
+    assert budgets[:3] == pytest.approx([node.scan_budget * 0.1] * 2 + [node.scan_budget * 0.05])
+    assert budgets[3] is None
 
 
 def test_requests_wait_for_the_next_scan_and_set_pose_waits_for_the_aligner():

@@ -3,11 +3,13 @@
 (:mod:`.decision`) on their evidence (:mod:`.evidence`) settles; then the pose and covariance to publish.
 
 One loop for tracking and recovery: the global search is the plan's fifth stage, reached when no cheaper answer
-stands (or at once where the caller says why). Sequential mode (:mod:`..aligner`) and pair mode
-(:mod:`..pair_mode`) register through it alike; what they commit differs.
+stands (or at once where the caller says why). Within a live scan's budget (:mod:`.scan_budget`) the long stages
+run only where they fit; an answer that waited for them is then *unconfirmed*. Sequential mode (:mod:`..aligner`)
+and pair mode (:mod:`..pair_mode`) register through it alike; what they commit differs.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Optional
 
@@ -24,7 +26,8 @@ from cemnet_ros.pipeline.steps.frame import Frame
 from cemnet_ros.pipeline.steps.health import disagreement
 from cemnet_ros.pipeline.steps.metric_cem import MetricEngine
 from cemnet_ros.pipeline.steps.polish import Polisher
-from cemnet_ros.pipeline.steps.starts import Starts
+from cemnet_ros.pipeline.steps.scan_budget import ScanBudget, StageCosts
+from cemnet_ros.pipeline.steps.starts import Stage, Starts
 
 PREDICTION_SPREADS = 3.0  # an answer within this many tracking spreads of the prediction is the prediction's
 LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
@@ -58,11 +61,12 @@ class Registration:
 
     def __init__(self, config: AlignerConfig, engine: MetricEngine, spread: AdaptiveSpread) -> None:
         self.config, self.engine, self.spread = config, engine, spread
+        self.stage_costs = StageCosts()  # what the long stages cost on this machine (a live scan's budget reads it)
 
     def register(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, *, level: Optional[float],
                  search_because: str = "", T_last: Optional[np.ndarray] = None, dt_ratio: float = 1.0,
-                 effort: float = 1.0, moving: bool = True, T_fallback: Optional[np.ndarray] = None
-                 ) -> Registered:
+                 effort: float = 1.0, moving: bool = True, T_fallback: Optional[np.ndarray] = None,
+                 budget: Optional[ScanBudget] = None) -> Registered:
         """``frame`` registered against ``target_map`` near ``T_predicted``.
 
         ``level``: the running fitness of the vouched steps (None: none); ``search_because``: why the global search
@@ -70,28 +74,39 @@ class Registration:
         one (it widens the prediction's spread); ``effort`` (0, 1]: the share of the polishes' and the search's
         budgets (a live node behind its input); ``moving``: the prediction extrapolates a known motion (False: the
         first pair);
-        ``T_fallback``: where to search when the map has no points near the prediction.
+        ``T_fallback``: where to search when the map has no points near the prediction; ``budget``: a live scan's
+        time (None: the whole plan runs, as offline).
         """
         contest = Contest(Polisher(self.config, frame, target_map, effort), T_predicted)
         starts = Starts(self.config, self.engine, self.spread, dt_ratio, T_last, T_fallback)
         rotation, translation = self.spread.spread()  # not stretched by a gap: "near" must stay a claim
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
-        stages = starts.plan(contest, searched_first=bool(search_because))
-        evidence, verdict, why = None, None, search_because
+        long_stages: dict[Stage, str] = {starts.search: "search", starts.turns: "turns"}
+        stages = starts.plan(contest, searched_first=bool(search_because) and (budget is None or budget.fits("search")))
+        evidence, verdict, why, left_out = None, None, search_because, ""
         while verdict is None or verdict.outcome not in EARLY:
             if verdict is not None and verdict.needs == Needs.NEIGHBOURS:
                 assert evidence is not None and evidence.leader is not None  # a verdict that needs them has one
                 starts.neighbours(contest, evidence.leader, turned=weak_view(evidence.leader, self.config.health),
                                   at_prediction=evidence.displaced)
             elif stages:
-                if verdict is not None and not why and stages[0] == starts.search:
+                stage, name = stages[0], long_stages.get(stages[0], "")
+                if name and budget is not None and verdict is not None and not budget.fits(name):
+                    left_out = budget.shortfall(name)
+                    break
+                if verdict is not None and not why and stage == starts.search:
                     why = f"tracking failed ({verdict.reason})"
+                started = time.perf_counter()
                 stages.pop(0)(contest)
+                if name:
+                    self.stage_costs.record(name, time.perf_counter() - started)
             else:
                 break
             evidence = contest.evidence(near, level, self.config.health, search_because, moving)
             verdict = decide(evidence, self.config.health)
         assert evidence is not None and verdict is not None  # every plan has a stage
+        if left_out and verdict.outcome == Outcome.UNSETTLED:  # rule 1 passed: the leader overlaps
+            verdict = Verdict(Outcome.UNCONFIRMED, f"unconfirmed ({verdict.reason}): {left_out}")
         prediction_std = self.config.recovery.radius if contest.searched else translation
         published = self._published(evidence, verdict, prediction_std, contest.polisher.frame)
         return Registered(verdict, evidence, *published, contest.searched, why, contest.polishes)
