@@ -54,6 +54,8 @@ from cemnet_ros.pipeline.steps.scan_budget import ScanBudget
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
 from cemnet_ros.pipeline.threads import bound_threads
 
+FIRST_PAIR, REQUESTED = "first pair", "requested"  # why a scan runs the global search whatever its budget
+
 
 class ScanAligner:
     """Stateful scan pipeline; see the module docstring for the recipe."""
@@ -118,7 +120,7 @@ class ScanAligner:
 
     def request_recovery(self) -> None:
         """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
-        self._pending_recovery = "requested"
+        self._pending_recovery = REQUESTED
 
     # -- sequential mode ------------------------------------------------------------------------------------
     def process(self, points: np.ndarray, stamp_ns: int, point_times: Optional[np.ndarray] = None,
@@ -149,13 +151,14 @@ class ScanAligner:
 
     @property
     def period_s(self) -> Optional[float]:
-        """The usual time between the scans' stamps (s; None before two scans)."""
+        """The running mean of the intervals between the stamps of the scans processed (s; None before two)."""
         period_ns = self._motion.period_ns
         return None if period_ns is None else period_ns * 1e-9
 
     def _budget(self, start: float, seconds: Optional[float]) -> Optional[ScanBudget]:
-        """The scan's budget from ``start`` (None: no bound, or a search requested: it runs whatever it costs)."""
-        if seconds is None or self._pending_recovery == "requested":
+        """The scan's budget from ``start`` (None: no bound; a first pair or a requested search runs whatever it
+        costs: nothing else can vouch for the one, and a user asked for the other)."""
+        if seconds is None or self._pending_recovery in (FIRST_PAIR, REQUESTED):
             return None
         return ScanBudget(start, seconds, self._registration.stage_costs)
 
@@ -186,7 +189,7 @@ class ScanAligner:
         self._motion.reset()
         self._motion.update(self._pose, stamp_ns)
         self._spread.reset()
-        self._pending_recovery = "first pair"  # a single pose predicts nothing
+        self._pending_recovery = FIRST_PAIR  # a single pose predicts nothing
         return AlignmentStep.unregistered(stamp_ns, self._pose, accepted=not restarted, fitness=1.0,
                                           latency_s=time.perf_counter() - start, n_points=len(frame.sampled),
                                           reason=reason, map_restarted=True)
@@ -253,8 +256,8 @@ class ScanAligner:
 
     def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, registered: Registered) -> None:
         """A step that is not failed: the fitness level takes it in; the map and the prediction errors a vouched
-        (or degenerate) one, not a near-tie or an unconfirmed one, which move the pose only (a map grown at a guess
-        would mislead every later scan)."""
+        (or degenerate) one, not a near-tie or an unconfirmed one, which move the pose and the level only (a map
+        grown at a guess would mislead every later scan)."""
         assert self._map is not None  # a step is only committed against the map it was registered on
         self._pending_recovery = ""
         self._failures_in_a_row = 0

@@ -46,7 +46,7 @@ class NodeConfig:
                                  choices=RELIABILITIES, user=True)
     qos_depth: int = param(5, "input QoS history depth", low=1, high=1000)
     queue_size: int = param(8, "scans waiting for the worker; when full the oldest is dropped (a global search "
-                            "holds the worker 0.3-3 s: docs/live.md)", low=1, high=100)
+                            "holds the worker 0.3-1.5 s: docs/live.md)", low=1, high=100)
     scan_budget: float = param(2.0, "input periods (the median interval between arriving scans) a scan may hold the "
                                "worker: the global search and the turns run in it only where what they cost here "
                                "fits, else its answer is published flagged 'unconfirmed'; 0 = no bound (as offline)",

@@ -115,7 +115,7 @@ class AlignerSession:
         live scan ``scan_budget`` x ``period_s`` of the worker's time (the usual time between arrivals; None: between
         the stamps); ``backlog`` None: offline, the whole plan at full effort."""
         live = backlog is not None
-        effort = self._output_config.behind_effort if live and backlog else 1.0
+        effort = self._output_config.behind_effort if live and backlog is not None and backlog > 0 else 1.0
         with self._map_lock:
             period_s = period_s if period_s is not None else self._aligner.period_s
             budget_s = self._output_config.scan_budget * period_s \

@@ -47,7 +47,7 @@ PIPELINE = parameters(AlignerConfig())  # the flags and params-file names it acc
 NODE = {name: p for name, p in parameters(NodeConfig()).items() if name in (
     "odom_frame", "base_frame", "base_to_sensor", "covariance_mode", "fixed_position_variance",
     "fixed_orientation_variance", "publish_tf", "invert_tf", "publish_aligned_cloud", "aligned_cloud_voxel",
-    "queue_size", "behind_effort", "scan_budget")}  # the last three: the node's queue, with --realtime
+    "queue_size", "behind_effort", "scan_budget")}  # the last three: the live node's, with --realtime
 
 
 # ---------------------------------------------------------------------------------------------- config

@@ -205,6 +205,10 @@ def test_a_live_scan_without_time_for_the_search_publishes_its_answer_unconfirme
     assert within(*step_error(poses, steps, 3), 0.03, 0.15)  # the answer is published (flagged), not the prediction
     assert steps[4].accepted and not steps[4].recovered, steps[4].reason  # tracked on from it
     assert within(*step_error(poses, steps, 4), 0.03, 0.15)
+    aligner.reset(aligner.pose)  # a new first pair: its search runs whatever the budget
+    first, second = (aligner.process(street_scan(WORLD, pose, rng), 10 * gap + k * PERIOD, budget_s=1e-6)
+                     for k, pose in enumerate(poses[:2]))
+    assert second.recovered and second.accepted and second.recovery_reason == "first pair", second.reason
 
 
 def test_a_car_that_keeps_its_speed_through_a_gap_of_a_second_is_tracked_from_the_prediction():

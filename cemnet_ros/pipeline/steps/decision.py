@@ -14,12 +14,12 @@ the map's last scan saw empty have not competed (:mod:`.evidence`).
    expects it (:attr:`~.evidence.Evidence.expected`: the prediction's polish reached it or it lies within the
    prediction's spread): it stands without further starts. Anything else waits for the global search, whose
    starts are independent of the prediction; after it an answer stands when it is confirmed, or when the
-   prediction expects it and it still overlaps (rule 1). Where a live scan's budget leaves no time for the search
-   (:mod:`.scan_budget`), the answer that waited for it is *unconfirmed*: flagged, the pose and the running level
-   take it, the map does not. Without a running level (a first pair; a map restarted
+   prediction expects it and it still overlaps (rule 1). Without a running level (a first pair; a map restarted
    after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where no
    motion is known yet (a first pair), when the search found no near-tie; and then at least as much of the scan
-   must lie on the map's surfaces as off the map (consistency >= 0).
+   must lie on the map's surfaces as off the map (consistency >= 0). Where a live scan's budget leaves no time
+   for the search, the registration turns a verdict still waiting for it into *unconfirmed*, or *ambiguous* for
+   equals none next to the prediction (:mod:`.registration`, :mod:`.scan_budget`).
 5. **Displaced**: an answer that stands on that evidence but lies farther from the predicted position than the
    fine polish reaches (along a known motion) waits for its neighbours: its own rotation at the predicted
    position competes. A slide along a weakly constrained direction keeps the right rotation (3-5 m on Livox
@@ -47,7 +47,7 @@ class Outcome(str, enum.Enum):
 
     ACCEPTED = "accepted"  # vouched for: the pose, the map, the motion model and the level take it in
     DEGENERATE = "degenerate"  # flagged: the prediction kept along the free direction; the map takes it in
-    NEAR_TIE = "near-tie"  # flagged: the answer next to the prediction among equals; the pose only moves
+    NEAR_TIE = "near-tie"  # flagged: the answer next to the prediction among equals; the pose and the level move
     UNCONFIRMED = "unconfirmed"  # flagged: the search it waited for did not fit a live scan's budget; as a near-tie
     AMBIGUOUS = "ambiguous"  # failed: equals, none next to the prediction
     FAILED = "failed"  # the prediction is published, flagged

@@ -82,7 +82,8 @@ class Registration:
         rotation, translation = self.spread.spread()  # not stretched by a gap: "near" must stay a claim
         near = (PREDICTION_SPREADS * translation, PREDICTION_SPREADS * rotation)
         long_stages: dict[Stage, str] = {starts.search: "search", starts.turns: "turns"}
-        stages = starts.plan(contest, searched_first=bool(search_because) and (budget is None or budget.fits("search")))
+        searched_first = bool(search_because) and (budget is None or budget.fits("search"))
+        stages = starts.plan(contest, searched_first=searched_first)
         evidence, verdict, why, left_out = None, None, search_because, ""
         while verdict is None or verdict.outcome not in EARLY:
             if verdict is not None and verdict.needs == Needs.NEIGHBOURS:
@@ -91,7 +92,8 @@ class Registration:
                                   at_prediction=evidence.displaced)
             elif stages:
                 stage, name = stages[0], long_stages.get(stages[0], "")
-                if name and budget is not None and verdict is not None and not budget.fits(name):
+                promised = searched_first and stage == starts.search  # it fitted when the plan was made
+                if name and budget is not None and verdict is not None and not promised and not budget.fits(name):
                     left_out = budget.shortfall(name)
                     break
                 if verdict is not None and not why and stage == starts.search:
@@ -106,10 +108,15 @@ class Registration:
             verdict = decide(evidence, self.config.health)
         assert evidence is not None and verdict is not None  # every plan has a stage
         if left_out and verdict.outcome == Outcome.UNSETTLED:  # rule 1 passed: the leader overlaps
-            verdict = Verdict(Outcome.UNCONFIRMED, f"unconfirmed ({verdict.reason}): {left_out}")
+            if evidence.tied and not evidence.near:  # as after the search: equals, none next to the prediction
+                verdict = Verdict(Outcome.AMBIGUOUS, f"ambiguous ({verdict.reason}), none next to the motion "
+                                                     f"prediction: {left_out}")
+            else:
+                verdict = Verdict(Outcome.UNCONFIRMED, f"unconfirmed ({verdict.reason}): {left_out}")
         prediction_std = self.config.recovery.radius if contest.searched else translation
         published = self._published(evidence, verdict, prediction_std, contest.polisher.frame)
-        return Registered(verdict, evidence, *published, contest.searched, why, contest.polishes)
+        return Registered(verdict, evidence, *published, contest.searched, why if contest.searched else "",
+                          contest.polishes)
 
     def _published(self, evidence: Evidence, verdict: Verdict, prediction_std: float, frame: Frame
                    ) -> tuple[Optional[np.ndarray], np.ndarray]:
