@@ -36,10 +36,7 @@ def live_run(sequence: Sequence, rate: Optional[float], overrides: Optional[Mapp
     if session.load() is None:
         raise RuntimeError(session.fatal_error)
     results: dict[int, StepResult] = {}
-    # the period the node's queue receives the scans at (a live scan's budget counts in it)
-    period_s = None if rate is None else float(np.median(np.diff(sequence.stamps_ns))) * 1e-9 / rate
-
-    def handle(k: int, backlog: Optional[int]) -> None:
+    def handle(k: int, backlog: Optional[int], period_s: Optional[float] = None) -> None:
         scan = SimpleNamespace(points=sequence.scans[k], stamp_ns=sequence.stamps_ns[k], times=None)
         try:
             step = session.process(scan, "", None, backlog, period_s).step

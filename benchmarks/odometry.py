@@ -14,6 +14,7 @@ from typing import Any, Callable, Mapping, Optional
 import numpy as np
 
 from cemnet_ros.io.console import log
+from cemnet_ros.pipeline.steps.scan_budget import budget_seconds
 
 METHODS = ("cemnet", "kiss-icp", "genz-icp", "gicp")
 
@@ -45,9 +46,8 @@ class CemnetOdometry:
         self._scan_budget = scan_budget
 
     def process(self, points: np.ndarray, stamp_ns: int) -> Output:
-        period_s = self._aligner.period_s
-        budget_s = self._scan_budget * period_s if self._scan_budget > 0.0 and period_s is not None else None
-        step = self._aligner.process(points, stamp_ns, budget_s=budget_s)
+        step = self._aligner.process(points, stamp_ns,
+                                     budget_s=budget_seconds(self._scan_budget, self._aligner.period_s))
         return Output(np.asarray(step.pose), bool(step.accepted), str(step.reason), np.asarray(step.covariance),
                       bool(step.recovered), step.answer, bool(step.map_restarted))
 

@@ -16,6 +16,8 @@ from typing import Any, Callable, Iterable, Iterator, Optional
 
 import numpy as np
 
+from cemnet_ros.runtime.arrival_period import ArrivalPeriod
+
 
 @dataclass
 class LiveScan:
@@ -38,9 +40,10 @@ class LiveScan:
 
 
 def play_live(items: Iterable[Any], stamp_ns: Callable[[Any], int], rate: float, queue_size: int,
-              handle: Callable[[Any, int], None]) -> list[LiveScan]:
+              handle: Callable[[Any, int, Optional[float]], None]) -> list[LiveScan]:
     """Play ``items`` (in stamp order) at ``rate`` x their timing into a queue of ``queue_size``; ``handle(item,
-    backlog)`` processes one. Returns every item's :class:`LiveScan`, in arrival order."""
+    backlog, period_s)`` processes one (``period_s``: the arrivals' period so far, as the node measures it; None
+    before three). Returns every item's :class:`LiveScan`, in arrival order."""
     if rate <= 0 or queue_size < 1:
         raise ValueError("rate must be > 0 and queue_size >= 1")
     scans: list[LiveScan] = []
@@ -48,6 +51,7 @@ def play_live(items: Iterable[Any], stamp_ns: Callable[[Any], int], rate: float,
     upcoming: Iterator[Any] = iter(items)
     first_ns: Optional[int] = None
     free_s = 0.0  # when the worker is free
+    arrivals = ArrivalPeriod()
     nxt = next(upcoming, None)
     while nxt is not None or waiting:
         if nxt is not None:
@@ -57,13 +61,14 @@ def play_live(items: Iterable[Any], stamp_ns: Callable[[Any], int], rate: float,
                 if len(waiting) >= queue_size:
                     waiting.popleft()  # dropped: its LiveScan keeps start_s None
                 scans.append(LiveScan(len(scans), arrival))
+                arrivals.arrived(arrival)
                 waiting.append((scans[-1], nxt))
                 nxt = next(upcoming, None)
                 continue
         scan, item = waiting.popleft()
         scan.start_s, scan.backlog = max(free_s, scan.arrival_s), len(waiting)
         began = time.perf_counter()
-        handle(item, scan.backlog)
+        handle(item, scan.backlog, arrivals.seconds)
         free_s = scan.start_s + time.perf_counter() - began
         scan.finish_s = free_s
     return scans

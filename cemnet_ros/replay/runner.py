@@ -40,7 +40,6 @@ from cemnet_ros.replay.bag_io import (
 from cemnet_ros.replay.realtime import LiveScan, play_live
 from cemnet_ros.ros.node_config import NodeConfig
 from cemnet_ros.runtime.aligner_session import AlignerSession
-from cemnet_ros.runtime.arrival_period import ArrivalPeriod
 from cemnet_ros.runtime.extrinsic import BaseFrame, pose_from_xyz_rpy
 from cemnet_ros.runtime.odometry_output import OdometryOutput, aligned_points, tf_parent_child
 
@@ -99,7 +98,6 @@ class _Replayer:
         self.session = AlignerSession(aligner.config, node, BaseFrame(pose_from_xyz_rpy(node.base_to_sensor)),
                                       make_aligner=lambda _: aligner)
         self.session.load()
-        self.arrivals = ArrivalPeriod()  # with realtime: the scans' virtual arrivals (the node's clock)
         self.result = ReplayResult()
         copies = copied_topics(reader, node)
         self._pending = list(heapq.merge(*([(ns, k, topic, typ, msg) for k, (ns, typ, msg)
@@ -120,11 +118,11 @@ class _Replayer:
                        "messages are counted, not shown)", file=sys.stderr)
         self.result.skipped.append(skipped)
 
-    def process(self, frame: CloudFrame, backlog: Optional[int] = None) -> None:
-        """Align one scan as align_node does (``backlog``: newer scans waiting in its queue; None: offline) and
-        publish it."""
+    def process(self, frame: CloudFrame, backlog: Optional[int] = None, period_s: Optional[float] = None) -> None:
+        """Align one scan as align_node does (``backlog``: newer scans waiting in its queue, ``period_s``: the
+        period they arrive at; None: offline) and publish it."""
         try:  # as align_node, without a clock: no future-stamp check offline
-            result = self.session.process(frame, frame.frame_id, None, backlog, self.arrivals.seconds)
+            result = self.session.process(frame, frame.frame_id, None, backlog, period_s)
         except ValueError as err:  # ScanRejected (too few points, ...) or a cloud the core refuses
             kind = err.kind if isinstance(err, ScanRejected) else "registration"
             self.skip(SkippedMessage(frame.index, self.topic, frame.stamp_ns, frame.t_s, kind, str(err)))
@@ -136,13 +134,14 @@ class _Replayer:
         self.result.poses.append(out.T_odom_base)
         self.result.steps.append(_step_record(frame.index, step, out))
 
-    def take(self, item: CloudFrame | SkippedMessage, backlog: Optional[int] = None) -> None:
+    def take(self, item: CloudFrame | SkippedMessage, backlog: Optional[int] = None,
+             period_s: Optional[float] = None) -> None:
         """One cloud message of the bag: counted, then skipped or processed."""
         self.result.n_messages += 1
         if isinstance(item, SkippedMessage):
             self.skip(item)
         else:
-            self.process(item, backlog)
+            self.process(item, backlog, period_s)
 
     def publish(self, stamp_ns: int, points: np.ndarray, out: OdometryOutput, T_odom_sensor: np.ndarray) -> None:
         """What align_node publishes, offline: pose, odometry, /tf, the aligned cloud (``points`` placed at
@@ -172,20 +171,16 @@ def run_replay(reader: BagReader, aligner, out_bag: Path, limit: Optional[int], 
                                                           desc="replay") as bar:
         replayer = _Replayer(reader, aligner, bag, node)
 
-        def take(item: CloudFrame | SkippedMessage, backlog: Optional[int] = None) -> None:
-            replayer.take(item, backlog)
+        def take(item: CloudFrame | SkippedMessage, backlog: Optional[int] = None,
+                 period_s: Optional[float] = None) -> None:
+            replayer.take(item, backlog, period_s)
             bar.update()
 
         if realtime is None:
             for item in reader.scans(limit):
                 take(item)
         else:
-            def arriving(items):  # each scan as the node's queue receives it, on the virtual clock
-                for item in items:
-                    replayer.arrivals.arrived(item.stamp_ns * 1e-9 / realtime)
-                    yield item
-
-            replayer.result.live = play_live(arriving(reader.scans(limit)), lambda item: item.stamp_ns, realtime,
+            replayer.result.live = play_live(reader.scans(limit), lambda item: item.stamp_ns, realtime,
                                              node.queue_size, take)
             bar.update(total - bar.n)  # the dropped ones
         replayer.copy_until(None)

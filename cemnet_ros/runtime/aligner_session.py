@@ -18,6 +18,7 @@ import numpy as np
 
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.steps.scan_budget import budget_seconds
 from cemnet_ros.runtime.extrinsic import BaseFrame
 from cemnet_ros.runtime.odometry_output import OdometryOutput, odometry_output
 from cemnet_ros.runtime.trajectory_log import TrajectoryLog
@@ -114,12 +115,10 @@ class AlignerSession:
         scans waiting in a live node's queue (while behind, a scan gets ``behind_effort`` of the budgets), and every
         live scan ``scan_budget`` x ``period_s`` of the worker's time (the usual time between arrivals; None: between
         the stamps); ``backlog`` None: offline, the whole plan at full effort."""
-        live = backlog is not None
-        effort = self._output_config.behind_effort if live and backlog is not None and backlog > 0 else 1.0
+        effort = self._output_config.behind_effort if backlog is not None and backlog > 0 else 1.0
         with self._map_lock:
-            period_s = period_s if period_s is not None else self._aligner.period_s
-            budget_s = self._output_config.scan_budget * period_s \
-                if live and period_s is not None and self._output_config.scan_budget > 0.0 else None
+            budget_s = None if backlog is None else budget_seconds(
+                self._output_config.scan_budget, period_s if period_s is not None else self._aligner.period_s)
             step = self._aligner.process(scan.points, scan.stamp_ns, scan.times, frame_id=frame_id, now_ns=now_ns,
                                          effort=effort, budget_s=budget_s)
         return self._result(step)

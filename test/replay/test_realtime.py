@@ -27,7 +27,7 @@ def clock(monkeypatch):
 def play(clock, costs, rate=1.0, queue_size=2, period_ns=100_000_000):
     seen = []
 
-    def handle(k, backlog):
+    def handle(k, backlog, period_s):
         seen.append((k, backlog))
         clock.now += costs[k]
 
@@ -64,6 +64,6 @@ def test_a_faster_rate_compresses_the_arrivals(clock):
 
 def test_bad_rates_and_queues_are_refused():
     with pytest.raises(ValueError):
-        play_live([], int, 0.0, 2, lambda item, backlog: None)
+        play_live([], int, 0.0, 2, lambda item, backlog, period_s: None)
     with pytest.raises(ValueError):
-        play_live([], int, 1.0, 0, lambda item, backlog: None)
+        play_live([], int, 1.0, 0, lambda item, backlog, period_s: None)

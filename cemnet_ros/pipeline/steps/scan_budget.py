@@ -14,6 +14,11 @@ from typing import Optional
 MEMORY = 0.5  # the weight of a stage's last run in its expected cost (a running mean that follows the machine)
 
 
+def budget_seconds(periods: float, period_s: Optional[float]) -> Optional[float]:
+    """``periods`` of ``period_s`` (None: no bound, ``periods`` 0 or no period known yet)."""
+    return periods * period_s if periods > 0.0 and period_s is not None else None
+
+
 class StageCosts:
     """What each long stage has cost on this machine (s): a running mean per stage; a stage not run yet is
     expected to cost what the search does (the turns cost more: the estimate only errs towards running one)."""
