@@ -61,3 +61,18 @@ def test_the_prediction_is_recentred_only_before_any_answer():
     c.enter(at(0.0), Origin.SEARCH)
     with pytest.raises(AssertionError):
         c.recentre(at(0.0))
+
+
+def test_a_review_enters_only_a_distinct_answer_the_map_s_last_scan_leads_to():
+    right, aside, elsewhere = at(0.1), at(0.25), at(0.1, 3.0)  # aside: distinct, but within the fine polish's reach
+    agreeing = Contest(Landscape(Basin(right, 0.8), last_scan=((right, aside),)), at(0.0))  # type: ignore[arg-type]
+    leader = agreeing.enter(at(0.0), Origin.PREDICTION)
+    assert leader is not None and not agreeing.reviewed(leader)
+    assert agreeing.review(leader) is None and agreeing.reviewed(leader)  # polished back onto the leader
+    assert agreeing.polishes == 2 and len(agreeing.answers) == 1 and Origin.LAST_SCAN in agreeing.support(leader)
+    disagreeing = Contest(Landscape(Basin(right, 0.8), Basin(elsewhere, 0.8), last_scan=((right, elsewhere),)),  # type: ignore[arg-type]
+                          at(0.0))
+    leader = disagreeing.enter(at(0.0), Origin.PREDICTION)
+    assert leader is not None
+    found = disagreeing.review(leader)
+    assert found is not None and found.origin == Origin.LAST_SCAN and np.allclose(found.T_odom_sensor, elsewhere)

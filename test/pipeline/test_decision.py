@@ -29,11 +29,11 @@ def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, condit
 
 
 def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", moving=True,
-             missing="", seen_through=lambda answer: 0.0, reach=np.inf) -> Evidence:
+             missing="", seen_through=lambda answer: 0.0, reach=np.inf, reviewed=lambda answer: True) -> Evidence:
     expectation = Expectation(at(0.0), NEAR, level, because, moving, reach)
     return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}),
                        seen_through=seen_through, searched=searched, neighbours_checked=neighbours,
-                       missing=missing)
+                       last_scan_checked=reviewed, missing=missing)
 
 
 def test_no_answer_or_no_overlap_fails():
@@ -166,3 +166,17 @@ def test_without_a_level_more_of_the_scan_off_the_map_than_on_its_surfaces_fails
     sparse = answer(fitness=0.3, coverage=0.6)  # consistency -0.1
     verdict = decide(evidence(sparse, level=None, moving=False, searched=True), RULES)
     assert verdict.outcome == Outcome.FAILED and "off the map (0.400)" in verdict.reason
+
+
+def test_an_answer_that_would_stand_waits_for_the_map_s_last_scan_first():
+    right = answer(explained=True)
+    waiting = decide(evidence(right, reviewed=lambda a: False), RULES)
+    assert waiting.outcome == Outcome.UNSETTLED and waiting.needs == Needs.LAST_SCAN
+    degenerate = answer(explained=True, conditioning=RULES.min_conditioning / 2)
+    assert decide(evidence(degenerate, reviewed=lambda a: False), RULES).needs == Needs.LAST_SCAN
+    assert decide(evidence(degenerate), RULES).outcome == Outcome.DEGENERATE
+    weak = answer(explained=True, conditioning=(RULES.min_conditioning + RULES.neighbour_conditioning) / 2)
+    assert decide(evidence(weak, reviewed=lambda a: False), RULES).needs == Needs.NEIGHBOURS  # its basin first
+    # What the last scan leads to competes: an equal distinct answer makes a near-tie once the search has run.
+    elsewhere = answer(x=0.0, yaw_deg=2.0, origin=Origin.LAST_SCAN)
+    assert decide(evidence(right, elsewhere, searched=True), RULES).outcome == Outcome.NEAR_TIE

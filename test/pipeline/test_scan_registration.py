@@ -101,6 +101,21 @@ def test_an_answer_that_slid_from_the_predicted_position_competes_with_its_rotat
     assert not as_good.verdict.vouched and "distinct answers" in as_good.verdict.reason
 
 
+def test_an_answer_the_map_s_last_scan_leads_away_from_competes_with_where_it_leads(stages):
+    right, turned = Basin(at(0.05), 0.8), at(0.05, 2.0)  # the last scan leads 2 deg away, where the map fits too
+    tie = register(Landscape(right, Basin(turned, 0.79), last_scan=((right.pose, turned),)))
+    assert tie.verdict.outcome == Outcome.NEAR_TIE and "search" in stages["ran"]  # flagged: the scene cannot tell
+    assert Origin.LAST_SCAN in {answer.origin for answer in tie.evidence.tied}
+    stages["ran"].clear()
+    better = register(Landscape(right, Basin(turned, 0.95), last_scan=((right.pose, turned),)))
+    assert better.verdict.outcome == Outcome.ACCEPTED and stages["ran"] == ["prediction"]
+    np.testing.assert_allclose(better.T_odom_sensor, turned)
+    stages["ran"].clear()
+    agreed = register(Landscape(right))  # the last scan leads back to the answer: no second polish
+    assert agreed.verdict.outcome == Outcome.ACCEPTED and agreed.polishes == 1
+    assert Origin.LAST_SCAN in agreed.evidence.support
+
+
 def test_no_answer_anywhere_fails_with_the_reason_and_a_wide_covariance(stages, monkeypatch):
     monkeypatch.setattr(Starts, "prediction_from_afar", lambda self, contest: None)
     monkeypatch.setattr(Starts, "last_pose", lambda self, contest: None)

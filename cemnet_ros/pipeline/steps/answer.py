@@ -39,6 +39,7 @@ class Origin(str, enum.Enum):
     SEARCH = "search"  # a hypothesis of the global search
     TURN = "turn"  # the last pose turned by a few tens of degrees (the recovery's grid of turns)
     NEIGHBOUR = "neighbour"  # an answer turned by the fine polish's reach either way (its basin checked)
+    LAST_SCAN = "last scan"  # an answer polished wide from itself: where the map's last scan alone leads from it
 
 
 def distinct(T_a: np.ndarray, T_b: np.ndarray) -> bool:

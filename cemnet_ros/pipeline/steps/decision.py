@@ -24,11 +24,16 @@ the map's last scan saw empty have not competed (:mod:`.evidence`).
    fine polish reaches (along a known motion) waits for its neighbours: its own rotation at the predicted
    position competes. A slide along a weakly constrained direction keeps the right rotation (3-5 m on Livox
    keyframes, with the right turn); a right answer that far off a poor prediction still leads.
-6. **Degenerate**: an answer that stands on that evidence but whose view leaves a direction unconstrained
-   (conditioning below ``min_conditioning``): flagged, the prediction kept along that direction.
-7. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
-   flat valley) waits for its rotational neighbours to compete (a near-tie then flags it, rule 3).
-8. Otherwise: *accepted*.
+6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
+   flat valley) but not degenerate waits for its rotational neighbours to compete (a near-tie then flags it,
+   rule 3).
+7. **Seen from the last scan**: an answer that stands on that evidence waits for its own wide polish (GICP against
+   the map's last scan from it, then fine). Where the map has grown from a slid or turned step, its older parts
+   can outvote the scan it took in last; from there the polish lands on an answer of its own, which competes
+   (a near-tie, rule 3; a clearly more consistent one leads and is judged in turn).
+8. **Degenerate**: an answer whose view leaves a direction unconstrained (conditioning below
+   ``min_conditioning``): flagged, the prediction kept along that direction.
+9. Otherwise: *accepted*.
 """
 from __future__ import annotations
 
@@ -59,6 +64,7 @@ class Needs(str, enum.Enum):
 
     SEARCH = "search"
     NEIGHBOURS = "neighbours"
+    LAST_SCAN = "last scan"
 
 
 @dataclass(frozen=True)
@@ -80,7 +86,7 @@ class Verdict:
 
 
 def weak_view(answer: Answer, rules: HealthConfig) -> bool:
-    """``answer``'s view is weakly constrained (rule 7): its rotational neighbours compete before it stands."""
+    """``answer``'s view is weakly constrained (rule 6): its rotational neighbours compete before it stands."""
     return answer.signals.conditioning < rules.neighbour_conditioning
 
 
@@ -122,9 +128,12 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
     if evidence.displaced and not evidence.neighbours_checked:
         return Verdict(Outcome.UNSETTLED, f"{evidence.offset[0]:.2f} m from the predicted position",
                        Needs.NEIGHBOURS)
-    if leader.signals.conditioning < rules.min_conditioning:
+    degenerate = leader.signals.conditioning < rules.min_conditioning
+    if not degenerate and weak_view(leader, rules) and not evidence.neighbours_checked:
+        return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)
+    if not evidence.last_scan_checked:
+        return Verdict(Outcome.UNSETTLED, "not yet polished from the map's last scan", Needs.LAST_SCAN)
+    if degenerate:
         return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
                                            "prediction kept along the unconstrained direction")
-    if weak_view(leader, rules) and not evidence.neighbours_checked:
-        return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)
     return Verdict(Outcome.ACCEPTED)

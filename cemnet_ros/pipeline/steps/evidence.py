@@ -12,7 +12,8 @@
   ``near`` of the prediction (in every direction: along a direction the view leaves free an answer lies anywhere,
   so nearness there would be no claim); and the running fitness **level** of the vouched steps;
 - which starts have competed: the global **search** (independent of the prediction), the leader's rotational
-  **neighbours** (its basin checked on a weakly constrained view);
+  **neighbours** (its basin checked on a weakly constrained view), the leader's own **wide polish** (where the
+  map's last scan alone leads from it);
 - which answers the map's last scan **saw through**: an answer that puts more of the scan where that scan saw
   empty space (:mod:`~cemnet_ros.pipeline.map.free_space`) than ``health.max_seen_through`` x its fitness (the
   share it puts on the map's surfaces) contradicts what the map saw, and does not compete (measured most
@@ -58,15 +59,18 @@ class Evidence:
     offset: tuple[float, float]  # (m, rad) of the leader from the prediction
     searched: bool  # the global search's hypotheses have competed
     neighbours_checked: bool  # the leader's rotational neighbours have competed
+    last_scan_checked: bool  # a wide polish from the leader has competed
     contradicted: tuple[Answer, ...] = ()  # answers dropped: the map's last scan saw through them
     missing: str = ""
 
     @classmethod
     def of(cls, answers: Sequence[Answer], expectation: Expectation, rules: HealthConfig, *,
            support: Callable[[Answer], frozenset[Origin]], seen_through: Callable[[Answer], float],
-           searched: bool, neighbours_checked: bool, missing: str = "") -> "Evidence":
+           searched: bool, neighbours_checked: bool, last_scan_checked: Callable[[Answer], bool],
+           missing: str = "") -> "Evidence":
         """The record of ``answers`` (see the module); ``support``: the kinds of start that reached an answer,
-        ``seen_through``: the share of the scan an answer puts in the free space of the map's last scan."""
+        ``seen_through``: the share of the scan an answer puts in the free space of the map's last scan,
+        ``last_scan_checked``: a wide polish started at an answer has competed."""
         def contradicts(answer: Answer) -> bool:
             return seen_through(answer) > rules.max_seen_through * answer.fitness
 
@@ -81,7 +85,7 @@ class Evidence:
                            f"{rules.max_seen_through:.2f} x its fitness (the most consistent: "
                            f"{seen_through(first):.3f} against fitness {first.fitness:.3f})")
             return cls(expectation, None, (), None, frozenset(), (np.inf, np.inf), searched, neighbours_checked,
-                       tuple(contradicted), missing)
+                       False, tuple(contradicted), missing)
         best = ranked[0]
         margin = (1.0 - rules.tie_ratio) * best.fitness
         tied = [best]
@@ -102,7 +106,8 @@ class Evidence:
         rival = next((a for a in ranked if not any(a is c for c in contradicted)
                       and distinct(a.T_odom_sensor, leader.T_odom_sensor)), None)  # a competitor, distinct
         return cls(expectation, leader, tuple(tied) if len(tied) > 1 else (), rival, support(leader),
-                   offsets[nearest], searched, neighbours_checked, tuple(contradicted), missing)
+                   offsets[nearest], searched, neighbours_checked, last_scan_checked(leader), tuple(contradicted),
+                   missing)
 
     @property
     def near(self) -> bool:

@@ -86,10 +86,13 @@ class Registration:
         stages = starts.plan(contest, searched_first=searched_first)
         evidence, verdict, why, left_out = None, None, search_because, ""
         while verdict is None or verdict.outcome not in EARLY:
-            if verdict is not None and verdict.needs == Needs.NEIGHBOURS:
+            if verdict is not None and verdict.needs in (Needs.NEIGHBOURS, Needs.LAST_SCAN):
                 assert evidence is not None and evidence.leader is not None  # a verdict that needs them has one
-                starts.neighbours(contest, evidence.leader, turned=weak_view(evidence.leader, self.config.health),
-                                  at_prediction=evidence.displaced)
+                if verdict.needs == Needs.LAST_SCAN:
+                    contest.review(evidence.leader)
+                else:
+                    starts.neighbours(contest, evidence.leader, turned=weak_view(evidence.leader, self.config.health),
+                                      at_prediction=evidence.displaced)
             elif stages:
                 stage, name = stages[0], long_stages.get(stages[0], "")
                 promised = searched_first and stage == starts.search  # it fitted when the plan was made
