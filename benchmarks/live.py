@@ -4,7 +4,9 @@ Each run is a fresh :class:`~cemnet_ros.runtime.aligner_session.AlignerSession` 
 ``behind_effort`` rule) fed through :func:`~cemnet_ros.replay.realtime.play_live`: the node's queue on a virtual
 clock, each scan taking the time its processing really takes here. Offline (rate None) every scan is aligned
 with the full budgets. What came out (the processed scans) is scored against the reference as in
-:mod:`.real`: ATE, end drift, steps off between consecutive processed scans, accepted apart from flagged.
+:mod:`.real`: ATE, end drift, steps off between consecutive processed scans, accepted apart from flagged, and
+every step adjudicated as ``bench_real.py`` does (:mod:`.adjudication`: wrong only when off the data's own
+optimum too).
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from typing import Any, Mapping, Optional
 
 import numpy as np
 
+from benchmarks.adjudication import DataOptimum
 from benchmarks.real import Sequence, StepResult, sequence_metrics
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.errors import ScanRejected
@@ -55,7 +58,8 @@ def live_run(sequence: Sequence, rate: Optional[float], overrides: Optional[Mapp
     else:
         live = live_summary(play_live(indices, lambda k: sequence.stamps_ns[k], rate, node.queue_size, handle))
     kept = sorted(results)
-    metrics = sequence_metrics(sequence.subset(kept), [results[k] for k in kept])
+    processed = sequence.subset(kept)
+    metrics = sequence_metrics(processed, [results[k] for k in kept], DataOptimum(processed.scans))
     return {"rate": rate, **live, **{k: metrics[k] for k in KEPT}, "off_steps": metrics["off_steps"]}
 
 

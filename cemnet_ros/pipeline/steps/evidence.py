@@ -59,7 +59,7 @@ class Evidence:
     offset: tuple[float, float]  # (m, rad) of the leader from the prediction
     searched: bool  # the global search's hypotheses have competed
     neighbours_checked: bool  # the leader's rotational neighbours have competed
-    last_scan_checked: bool  # a wide polish from the leader has competed
+    last_scan_checked: bool  # the leader has been reviewed from the map's last scan (its own wide polish)
     contradicted: tuple[Answer, ...] = ()  # answers dropped: the map's last scan saw through them
     missing: str = ""
 
@@ -70,7 +70,7 @@ class Evidence:
            missing: str = "") -> "Evidence":
         """The record of ``answers`` (see the module); ``support``: the kinds of start that reached an answer,
         ``seen_through``: the share of the scan an answer puts in the free space of the map's last scan,
-        ``last_scan_checked``: a wide polish started at an answer has competed."""
+        ``last_scan_checked``: an answer has been reviewed from the map's last scan."""
         def contradicts(answer: Answer) -> bool:
             return seen_through(answer) > rules.max_seen_through * answer.fitness
 
