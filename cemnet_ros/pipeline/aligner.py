@@ -14,7 +14,7 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    plan ends once an answer stands; the global search competes where the cheaper starts do not settle it, on the
    first pair, after a failed step and on request;
 5. **commit** the outcome: an accepted step moves the pose, the map, the motion model, the adaptive spread and
-   the running fitness level; a failed one is published flagged with the prediction and changes nothing else
+   the running level; a failed one is published flagged with the prediction and changes nothing else
    (too many in a row restart the map, where :mod:`.steps.lost_streak` says, and the level with it); a
    degenerate one keeps the prediction along the unconstrained directions, is flagged, and still extends the map;
    a near-tie, or an unconfirmed one (a live scan without time for the search, :mod:`.steps.scan_budget`), is
@@ -264,7 +264,7 @@ class ScanAligner:
         self._lost.reset()
         leader = registered.evidence.leader
         assert leader is not None  # a step that is not failed has an answer
-        self._level.accept(leader.fitness)  # near-ties too: equals fit alike, and that is what this scene gives
+        self._level.accept(leader.signals)  # near-ties too: equals fit alike, and that is what this scene gives
         if registered.verdict.outcome in (Outcome.NEAR_TIE, Outcome.UNCONFIRMED):
             return
         if not registered.searched:  # a search's guess was no prediction of the motion model

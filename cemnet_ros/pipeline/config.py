@@ -98,9 +98,9 @@ class HealthConfig:
                                "map of sparse scans fits ~0.2)", low=0.0, high=0.99)
     fitness_drop: float = param(0.7, "a step fails when its fitness falls below this fraction of the running "
                                 "level", low=0.01, high=1.0)
-    confirm_ratio: float = param(0.9, "an answer stands without the global search when it fits at least this "
-                                 "fraction of the running level where the prediction expects it; away from the "
-                                 "prediction it must, after the search too", low=0.0, high=1.0)
+    confirm_ratio: float = param(0.9, "an answer stands without the global search when it fits and covers at "
+                                 "least this fraction of the running levels where the prediction expects it; away "
+                                 "from the prediction it must, after the search too", low=0.0, high=1.0)
     coverage_distance: float = param(6.0, "a scan point is covered by the map when a map point lies this close "
                                      "(frame voxels)", low=0.1)
     max_seen_through: float = param(0.2, "an answer that puts more of the scan where the map's last scan saw empty "
@@ -109,8 +109,8 @@ class HealthConfig:
     tie_ratio: float = param(0.95, "distinct answers whose consistency falls short of the best one's by less than "
                              "1 - this of its fitness are a near-tie: the one next to the prediction is kept, "
                              "flagged; with none next to it the step fails as ambiguous", low=0.01, high=1.0)
-    level_memory: float = param(0.9, "running fitness level: level <- memory * level + (1 - memory) * fitness",
-                                low=0.0, high=0.999)
+    level_memory: float = param(0.9, "running fitness and coverage levels: level <- memory * level + (1 - memory) "
+                                "* the vouched step's", low=0.0, high=0.999)
     min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
                                     "below which a step is degenerate (flagged, prediction kept along the free "
                                     "direction)", low=0.0, high=0.99)

@@ -73,7 +73,7 @@ class PairMode:
         if not failed:
             self._motion.update(pose, stamp_ns)
         if registered.verdict.vouched and registered.evidence.leader is not None:
-            self._level.accept(registered.evidence.leader.fitness)
+            self._level.accept(registered.evidence.leader.signals)
         self._last_stamp = stamp_ns
         self.source_checks.passed(admitted)
         covariance = registered.covariance * (self.config.health.covariance_inflation if failed else 1.0)

@@ -10,10 +10,11 @@ from cemnet_ros.pipeline.steps.answer import Answer, Origin
 from cemnet_ros.pipeline.steps.covariance import Conditioning
 from cemnet_ros.pipeline.steps.decision import Needs, Outcome, decide
 from cemnet_ros.pipeline.steps.evidence import Evidence, Expectation
-from cemnet_ros.pipeline.steps.health import Signals
+from cemnet_ros.pipeline.steps.health import Level, Signals
 
 RULES = HealthConfig()
 LEVEL = 0.6
+COVERAGE = 0.95  # the running coverage of the vouched steps
 NEAR = (0.5, 0.1)  # m, rad
 
 
@@ -30,7 +31,8 @@ def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, condit
 
 def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", moving=True,
              missing="", seen_through=lambda answer: 0.0, reach=np.inf, reviewed=lambda answer: True) -> Evidence:
-    expectation = Expectation(at(0.0), NEAR, level, because, moving, reach)
+    running = None if level is None else Level(level, COVERAGE)
+    expectation = Expectation(at(0.0), NEAR, running, because, moving, reach)
     return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}),
                        seen_through=seen_through, searched=searched, neighbours_checked=neighbours,
                        last_scan_checked=reviewed, missing=missing)
@@ -65,6 +67,18 @@ def test_an_unconfirmed_answer_stands_after_the_search_only_where_the_prediction
     assert away.outcome == Outcome.FAILED and "3.00 m / 0.0 deg from the motion prediction" in away.reason
     reached = decide(evidence(answer(x=3.0, fitness=low, origin=Origin.PREDICTION), searched=True), RULES)
     assert reached.outcome == Outcome.ACCEPTED  # the prediction's own polish from afar reached it
+
+
+def test_an_answer_that_covers_less_of_the_scan_than_the_vouched_steps_did_is_unconfirmed():
+    # a turn that fits the walls as well as the truth but leaves a part of the scan where the map has nothing
+    short = RULES.confirm_ratio * COVERAGE - 0.02
+    waiting = decide(evidence(answer(coverage=short, explained=True)), RULES)
+    assert waiting.needs == Needs.SEARCH and waiting.reason.startswith(f"unconfirmed: coverage {short:.3f}")
+    assert decide(evidence(answer(coverage=short), searched=True), RULES).outcome == Outcome.ACCEPTED  # expected
+    away = decide(evidence(answer(x=3.0, coverage=short), searched=True), RULES)
+    assert away.outcome == Outcome.FAILED and "coverage" in away.reason
+    covered = RULES.confirm_ratio * COVERAGE + 0.02
+    assert decide(evidence(answer(coverage=covered, explained=True)), RULES).outcome == Outcome.ACCEPTED
 
 
 def test_a_reason_given_makes_the_search_compete_first():
@@ -168,14 +182,16 @@ def test_without_a_level_more_of_the_scan_off_the_map_than_on_its_surfaces_fails
     assert verdict.outcome == Outcome.FAILED and "off the map (0.400)" in verdict.reason
 
 
-def test_an_answer_that_would_stand_waits_for_the_map_s_last_scan_first():
-    right = answer(explained=True)
+def test_an_answer_that_would_stand_waits_for_the_map_s_last_scan_first_unless_the_prediction_explains_it():
+    right = answer(x=0.3)  # within the prediction's spread, not where its polish converged
     waiting = decide(evidence(right, reviewed=lambda a: False), RULES)
     assert waiting.outcome == Outcome.UNSETTLED and waiting.needs == Needs.LAST_SCAN
-    degenerate = answer(explained=True, conditioning=RULES.min_conditioning / 2)
+    explained = answer(explained=True)  # a steady motion: the prediction's own polish converged to it
+    assert decide(evidence(explained, reviewed=lambda a: False), RULES).outcome == Outcome.ACCEPTED
+    degenerate = answer(x=0.3, conditioning=RULES.min_conditioning / 2)
     assert decide(evidence(degenerate, reviewed=lambda a: False), RULES).needs == Needs.LAST_SCAN
     assert decide(evidence(degenerate), RULES).outcome == Outcome.DEGENERATE
-    weak = answer(explained=True, conditioning=(RULES.min_conditioning + RULES.neighbour_conditioning) / 2)
+    weak = answer(x=0.3, conditioning=(RULES.min_conditioning + RULES.neighbour_conditioning) / 2)
     assert decide(evidence(weak, reviewed=lambda a: False), RULES).needs == Needs.NEIGHBOURS  # its basin first
     # What the last scan leads to competes: an equal distinct answer makes a near-tie once the search has run.
     elsewhere = answer(x=0.0, yaw_deg=2.0, origin=Origin.LAST_SCAN)

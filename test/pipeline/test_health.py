@@ -15,7 +15,7 @@ from cemnet_ros.pipeline.steps.covariance import (
     keep_prediction_along,
     moved_by,
 )
-from cemnet_ros.pipeline.steps.health import RunningLevel, Signals
+from cemnet_ros.pipeline.steps.health import Level, RunningLevel, Signals
 
 GOOD = Signals(fitness=0.8, disagreement_m=0.05, disagreement_rad=0.005, conditioning=0.3, spread_m=0.1)
 
@@ -47,13 +47,13 @@ def test_spread_is_clipped():
         AdaptiveConfig(min_rotation=0.5, max_rotation=0.1)
 
 
-def test_the_running_level_follows_the_vouched_fitness_until_reset():
+def test_the_running_level_follows_the_vouched_fitness_and_coverage_until_reset():
     level = RunningLevel(memory=0.5)
     assert level.level is None
-    level.accept(0.8)
-    assert level.level == pytest.approx(0.8)
-    level.accept(0.4)
-    assert level.level == pytest.approx(0.6)
+    level.accept(Signals(0.8, 0.0, 0.0, 0.1, 0.0, coverage=1.0))
+    assert level.level == Level(pytest.approx(0.8), pytest.approx(1.0))
+    level.accept(Signals(0.4, 0.0, 0.0, 0.1, 0.0, coverage=0.8))
+    assert level.level == Level(pytest.approx(0.6), pytest.approx(0.9))
     level.reset()
     assert level.level is None
 

@@ -11,6 +11,7 @@ from cemnet_ros.pipeline.steps import registration
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.answer import Origin
 from cemnet_ros.pipeline.steps.decision import Outcome
+from cemnet_ros.pipeline.steps.health import Level
 from cemnet_ros.pipeline.steps.starts import Starts
 
 CONFIG = AlignerConfig()
@@ -39,7 +40,7 @@ def stages(monkeypatch):
     return record
 
 
-def register(landscape, level=0.8, credible=True, **kwargs):
+def register(landscape, level=Level(0.8, 0.9), credible=True, **kwargs):
     spread = AdaptiveSpread(CONFIG.adaptive)
     if credible:
         spread.update(np.eye(4))  # a prediction that was right: polished finely first
@@ -102,18 +103,24 @@ def test_an_answer_that_slid_from_the_predicted_position_competes_with_its_rotat
 
 
 def test_an_answer_the_map_s_last_scan_leads_away_from_competes_with_where_it_leads(stages):
-    right, turned = Basin(at(0.05), 0.8), at(0.05, 2.0)  # the last scan leads 2 deg away, where the map fits too
+    # beyond the fine polish's reach of the prediction (not explained); the last scan leads 2 deg away from it,
+    # where the map fits too
+    right, turned = Basin(at(0.3), 0.8), at(0.3, 2.0)
     tie = register(Landscape(right, Basin(turned, 0.79), last_scan=((right.pose, turned),)))
     assert tie.verdict.outcome == Outcome.NEAR_TIE and "search" in stages["ran"]  # flagged: the scene cannot tell
     assert Origin.LAST_SCAN in {answer.origin for answer in tie.evidence.tied}
     stages["ran"].clear()
     better = register(Landscape(right, Basin(turned, 0.95), last_scan=((right.pose, turned),)))
-    assert better.verdict.outcome == Outcome.ACCEPTED and stages["ran"] == ["prediction"]
+    assert better.verdict.outcome == Outcome.ACCEPTED
     np.testing.assert_allclose(better.T_odom_sensor, turned)
     stages["ran"].clear()
-    agreed = register(Landscape(right))  # the last scan leads back to the answer: no second polish
-    assert agreed.verdict.outcome == Outcome.ACCEPTED and agreed.polishes == 1
+    agreed = register(Landscape(right))  # the last scan leads back to the answer: no polish of its own
+    assert agreed.verdict.outcome == Outcome.ACCEPTED and agreed.polishes == 2  # the prediction's, from afar
     assert Origin.LAST_SCAN in agreed.evidence.support
+    stages["ran"].clear()
+    steady = register(Landscape(Basin(at(0.05), 0.8)))  # the prediction's own polish converged to it: no review
+    assert steady.verdict.outcome == Outcome.ACCEPTED and stages["ran"] == ["prediction"] and steady.polishes == 1
+    assert Origin.LAST_SCAN not in steady.evidence.support
 
 
 def test_no_answer_anywhere_fails_with_the_reason_and_a_wide_covariance(stages, monkeypatch):

@@ -21,6 +21,7 @@ from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.answer import Answer, Origin, distinct, measured
 from cemnet_ros.pipeline.steps.evidence import Evidence, Expectation
+from cemnet_ros.pipeline.steps.health import Level
 from cemnet_ros.pipeline.steps.polish import Polisher
 
 FREE_SPACE_POINTS = 1000
@@ -101,7 +102,7 @@ class Contest:
         assert not self.answers, "the answers were judged against the prediction"
         self.T_predicted = T_guess
 
-    def evidence(self, near: tuple[float, float], level: Optional[float], rules: HealthConfig,
+    def evidence(self, near: tuple[float, float], level: Optional[Level], rules: HealthConfig,
                  search_because: str = "", moving: bool = True) -> Evidence:
         """The record the decision reads (:class:`~.evidence.Evidence`)."""
         expectation = Expectation(self.T_predicted, near, level, search_because, moving, self.polisher.reach)

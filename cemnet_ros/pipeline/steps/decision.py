@@ -10,16 +10,17 @@ the map's last scan saw empty have not competed (:mod:`.evidence`).
 3. **Near-tie**: distinct answers within ``tie_ratio`` in consistency. The global search competes first; then the
    one next to the prediction is kept as a *near-tie* (flagged, the map does not take it in), and with none next
    to it the step is *ambiguous* (failed).
-4. **Confirmed where expected**: the leader fits at ``confirm_ratio`` x the running level and the prediction
-   expects it (:attr:`~.evidence.Evidence.expected`: the prediction's polish reached it or it lies within the
-   prediction's spread): it stands without further starts. Anything else waits for the global search, whose
-   starts are independent of the prediction; after it an answer stands when it is confirmed, or when the
-   prediction expects it and it still overlaps (rule 1). Without a running level (a first pair; a map restarted
-   after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where no
-   motion is known yet (a first pair), when the search found no near-tie; and then at least as much of the scan
-   must lie on the map's surfaces as off the map (consistency >= 0). Where a live scan's budget leaves no time
-   for the search, the registration turns a verdict still waiting for it into *unconfirmed*, or *ambiguous* for
-   equals none next to the prediction (:mod:`.registration`, :mod:`.scan_budget`).
+4. **Confirmed where expected**: the leader fits and covers the map at ``confirm_ratio`` x the running levels of the
+   vouched steps (a wrong turn in a building fits the walls as well as the truth, but leaves part of the scan where
+   the map has nothing) and the prediction expects it (:attr:`~.evidence.Evidence.expected`: the prediction's polish
+   reached it or it lies within the prediction's spread): it stands without further starts. Anything else waits for
+   the global search, whose starts are independent of the prediction; after it an answer stands when it is confirmed,
+   or when the prediction expects it and it still overlaps (rule 1). Without a running level (a first pair; a map
+   restarted after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where
+   no motion is known yet (a first pair), when the search found no near-tie; and then at least as much of the scan
+   must lie on the map's surfaces as off the map (consistency >= 0). Where a live scan's budget leaves no time for
+   the search, the registration turns a verdict still waiting for it into *unconfirmed*, or *ambiguous* for equals
+   none next to the prediction (:mod:`.registration`, :mod:`.scan_budget`).
 5. **Displaced**: an answer that stands on that evidence but lies farther from the predicted position than the
    fine polish reaches (along a known motion) waits for its neighbours: its own rotation at the predicted
    position competes. A slide along a weakly constrained direction keeps the right rotation (3-5 m on Livox
@@ -27,10 +28,11 @@ the map's last scan saw empty have not competed (:mod:`.evidence`).
 6. **Weak view**: an answer whose conditioning is below ``neighbour_conditioning`` (a narrow field of view down a
    flat valley) but not degenerate waits for its rotational neighbours to compete (a near-tie then flags it,
    rule 3).
-7. **Seen from the last scan**: an answer that stands on that evidence waits for its own wide polish (GICP against
-   the map's last scan from it, then fine). Where the map has grown from a slid or turned step, its older parts
-   can outvote the scan it took in last; from there the polish lands on an answer of its own, which competes
-   (a near-tie, rule 3; a clearly more consistent one leads and is judged in turn).
+7. **Seen from the last scan**: an answer that stands on that evidence, unless the prediction's own fine polish
+   converged to it (*explained*: a steady motion), waits for its own wide polish (GICP against the map's last
+   scan from it, then fine). Where the map has grown from a slid or turned step, its older parts can outvote the
+   scan it took in last; from there the polish lands on an answer of its own, which competes (a near-tie, rule 3;
+   a clearly more consistent one leads and is judged in turn).
 8. **Degenerate**: an answer whose view leaves a direction unconstrained (conditioning below
    ``min_conditioning``): flagged, the prediction kept along that direction.
 9. Otherwise: *accepted*.
@@ -39,12 +41,14 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.answer import Answer
 from cemnet_ros.pipeline.steps.evidence import Evidence
+from cemnet_ros.pipeline.steps.health import Level
 
 
 class Outcome(str, enum.Enum):
@@ -90,6 +94,18 @@ def weak_view(answer: Answer, rules: HealthConfig) -> bool:
     return answer.signals.conditioning < rules.neighbour_conditioning
 
 
+def shortfall(answer: Answer, level: Optional[Level], rules: HealthConfig) -> str:
+    """Where ``answer`` fits or covers less than ``confirm_ratio`` x the running level (rule 4; "": it does
+    neither, or there is no level)."""
+    if level is None:
+        return ""
+    if answer.fitness < rules.confirm_ratio * level.fitness:
+        return f"fitness {answer.fitness:.3f} < {rules.confirm_ratio:.2f} x its running level {level.fitness:.3f}"
+    if answer.coverage < rules.confirm_ratio * level.coverage:
+        return f"coverage {answer.coverage:.3f} < {rules.confirm_ratio:.2f} x its running level {level.coverage:.3f}"
+    return ""
+
+
 def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
     """The verdict on ``evidence`` (see the module for the rules)."""
     leader, expected = evidence.leader, evidence.expectation
@@ -100,9 +116,9 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         return Verdict(Outcome.FAILED, f"only {leader.n_pairs} point-to-plane pairs")
     if leader.fitness < rules.min_fitness:
         return Verdict(Outcome.FAILED, f"low fitness {leader.fitness:.3f} < {rules.min_fitness:.3f}")
-    if level is not None and leader.fitness < rules.fitness_drop * level:
+    if level is not None and leader.fitness < rules.fitness_drop * level.fitness:
         return Verdict(Outcome.FAILED, f"fitness {leader.fitness:.3f} fell below {rules.fitness_drop:.2f} x its "
-                                       f"running level {level:.3f}")
+                                       f"running level {level.fitness:.3f}")
     if expected.search_because and not evidence.searched:
         return Verdict(Outcome.UNSETTLED, expected.search_because, Needs.SEARCH)
     if evidence.tied:
@@ -112,10 +128,10 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         if evidence.near:
             return Verdict(Outcome.NEAR_TIE, f"symmetric scene: {summary}, the one next to the motion prediction kept")
         return Verdict(Outcome.AMBIGUOUS, f"ambiguous: {summary}, none next to the motion prediction")
-    confirmed = level is not None and leader.fitness >= rules.confirm_ratio * level
+    short = shortfall(leader, level, rules)
+    confirmed = level is not None and not short
     if not (confirmed and evidence.expected):
-        why = (f"fitness {leader.fitness:.3f} < {rules.confirm_ratio:.2f} x its running level {level:.3f}"
-               if level is not None and not confirmed else "no running level yet" if level is None
+        why = (short if short else "no running level yet" if level is None
                else f"{evidence.offset[0]:.2f} m from the motion prediction")
         if not evidence.searched:
             return Verdict(Outcome.UNSETTLED, f"unconfirmed: {why}", Needs.SEARCH)
@@ -131,7 +147,7 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
     degenerate = leader.signals.conditioning < rules.min_conditioning
     if not degenerate and weak_view(leader, rules) and not evidence.neighbours_checked:
         return Verdict(Outcome.UNSETTLED, "weakly constrained view", Needs.NEIGHBOURS)
-    if not evidence.last_scan_checked:
+    if not (leader.explained or evidence.last_scan_checked):
         return Verdict(Outcome.UNSETTLED, "not yet polished from the map's last scan", Needs.LAST_SCAN)
     if degenerate:
         return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "

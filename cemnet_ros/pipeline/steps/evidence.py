@@ -10,7 +10,7 @@
 - where it lies against the **expectation**: the prediction *expects* it when the prediction's own polish
   converged within reach of it, the prediction's start (fine or from afar) reached it, or it lies within
   ``near`` of the prediction (in every direction: along a direction the view leaves free an answer lies anywhere,
-  so nearness there would be no claim); and the running fitness **level** of the vouched steps;
+  so nearness there would be no claim); and the running **level** (fitness, coverage) of the vouched steps;
 - which starts have competed: the global **search** (independent of the prediction), the leader's rotational
   **neighbours** (its basin checked on a weakly constrained view), the leader's own **wide polish** (where the
   map's last scan alone leads from it);
@@ -32,7 +32,7 @@ import numpy as np
 from cemnet_ros.pipeline.config import HealthConfig
 from cemnet_ros.pipeline.steps.answer import Answer, Origin, distinct
 from cemnet_ros.pipeline.steps.covariance import keep_prediction_along
-from cemnet_ros.pipeline.steps.health import disagreement
+from cemnet_ros.pipeline.steps.health import Level, disagreement
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,7 @@ class Expectation:
 
     T_predicted: np.ndarray  # the motion model's pose (the guess, when the prediction left the map)
     near: tuple[float, float]  # (m, rad): how far from the prediction an answer is still the prediction's
-    level: Optional[float]  # the running fitness of the vouched steps (None: none yet, e.g. the first pair)
+    level: Optional[Level]  # the running fitness and coverage of the vouched steps (None: none yet, a first pair)
     search_because: str = ""  # why the global search must compete whatever the answers ("": only if they need it)
     moving: bool = True  # the prediction extrapolates a motion (False: a first pair, a new target: none known)
     reach: float = np.inf  # m: how far the fine polish reaches; a leader farther from the predicted position slid

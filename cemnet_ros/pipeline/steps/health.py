@@ -1,9 +1,10 @@
-"""The signals an answer reports about itself, and the running fitness level of the vouched steps.
+"""The signals an answer reports about itself, and the running level of the vouched steps.
 
-The level is what the decision (:mod:`.decision`) compares a new answer's fitness with: how much of a scan lies
-on the map's surfaces depends on the sensor, its density and the scene, so a right answer is one that fits about
-as well as the recent vouched steps did. It belongs to one map: a restarted map's steps set it again (what right
-answers fit depends on the scene, and until they do the decision has no level to confirm with).
+The level is what the decision (:mod:`.decision`) compares a new answer's fitness and coverage with: how much of a
+scan lies on the map's surfaces, and how much of it where the map has any, depends on the sensor, its density and
+the scene, so a right answer is one that fits and covers about as well as the recent vouched steps did. It
+belongs to one map: a restarted map's steps set it again (what right answers fit depends on the scene, and until
+they do the decision has no level to confirm with).
 """
 from __future__ import annotations
 
@@ -42,16 +43,30 @@ def disagreement(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(delta[:3, 3])), rotation_angle_rad(delta[:3, :3])
 
 
+@dataclass(frozen=True)
+class Level:
+    """The running fitness and coverage of the vouched steps."""
+
+    fitness: float
+    coverage: float
+
+
 class RunningLevel:
-    """The fitness of the vouched steps, smoothed: level <- memory * level + (1 - memory) * fitness."""
+    """The fitness and the coverage of the vouched steps, each smoothed: level <- memory * level + (1 - memory) *
+    the new step's."""
 
     def __init__(self, memory: float) -> None:
         self.memory = memory
-        self.level: Optional[float] = None
+        self.level: Optional[Level] = None
 
     def reset(self) -> None:
         self.level = None
 
-    def accept(self, fitness: float) -> None:
-        """A vouched step's fitness moves the level."""
-        self.level = fitness if self.level is None else self.memory * self.level + (1.0 - self.memory) * fitness
+    def accept(self, signals: Signals) -> None:
+        """A vouched step's fitness and coverage move the level."""
+        if self.level is None:
+            self.level = Level(signals.fitness, signals.coverage)
+            return
+        keep, take = self.memory, 1.0 - self.memory
+        self.level = Level(keep * self.level.fitness + take * signals.fitness,
+                           keep * self.level.coverage + take * signals.coverage)

@@ -23,7 +23,7 @@ from cemnet_ros.pipeline.steps.covariance import covariance_from_hessian, flat_c
 from cemnet_ros.pipeline.steps.decision import Needs, Outcome, Verdict, decide, weak_view
 from cemnet_ros.pipeline.steps.evidence import Evidence
 from cemnet_ros.pipeline.steps.frame import Frame
-from cemnet_ros.pipeline.steps.health import disagreement
+from cemnet_ros.pipeline.steps.health import Level, disagreement
 from cemnet_ros.pipeline.steps.metric_cem import MetricEngine
 from cemnet_ros.pipeline.steps.polish import Polisher
 from cemnet_ros.pipeline.steps.scan_budget import ScanBudget, StageCosts
@@ -63,19 +63,18 @@ class Registration:
         self.config, self.engine, self.spread = config, engine, spread
         self.stage_costs = StageCosts()  # what the long stages cost on this machine (a live scan's budget reads it)
 
-    def register(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, *, level: Optional[float],
+    def register(self, frame: Frame, target_map: VoxelMap, T_predicted: np.ndarray, *, level: Optional[Level],
                  search_because: str = "", T_last: Optional[np.ndarray] = None, dt_ratio: float = 1.0,
                  effort: float = 1.0, moving: bool = True, T_fallback: Optional[np.ndarray] = None,
                  budget: Optional[ScanBudget] = None) -> Registered:
         """``frame`` registered against ``target_map`` near ``T_predicted``.
 
-        ``level``: the running fitness of the vouched steps (None: none); ``search_because``: why the global search
-        must compete whatever tracking finds; ``T_last``: the last pose; ``dt_ratio``: this time step over the usual
-        one (it widens the prediction's spread); ``effort`` (0, 1]: the share of the polishes' and the search's
-        budgets (a live node behind its input); ``moving``: the prediction extrapolates a known motion (False: the
-        first pair);
-        ``T_fallback``: where to search when the map has no points near the prediction; ``budget``: a live scan's
-        time (None: the whole plan runs, as offline).
+        ``level``: the running fitness and coverage of the vouched steps (None: none); ``search_because``: why the
+        global search must compete whatever tracking finds; ``T_last``: the last pose; ``dt_ratio``: this time step
+        over the usual one (it widens the prediction's spread); ``effort`` (0, 1]: the share of the polishes' and
+        the search's budgets (a live node behind its input); ``moving``: the prediction extrapolates a known motion
+        (False: the first pair); ``T_fallback``: where to search when the map has no points near the prediction;
+        ``budget``: a live scan's time (None: the whole plan runs, as offline).
         """
         contest = Contest(Polisher(self.config, frame, target_map, effort), T_predicted)
         starts = Starts(self.config, self.engine, self.spread, dt_ratio, T_last, T_fallback)
