@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
@@ -94,11 +93,9 @@ def weak_view(answer: Answer, rules: HealthConfig) -> bool:
     return answer.signals.conditioning < rules.neighbour_conditioning
 
 
-def shortfall(answer: Answer, level: Optional[Level], rules: HealthConfig) -> str:
+def shortfall(answer: Answer, level: Level, rules: HealthConfig) -> str:
     """Where ``answer`` fits or covers less than ``confirm_ratio`` x the running level (rule 4; "": it does
-    neither, or there is no level)."""
-    if level is None:
-        return ""
+    neither)."""
     if answer.fitness < rules.confirm_ratio * level.fitness:
         return f"fitness {answer.fitness:.3f} < {rules.confirm_ratio:.2f} x its running level {level.fitness:.3f}"
     if answer.coverage < rules.confirm_ratio * level.coverage:
@@ -128,11 +125,10 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         if evidence.near:
             return Verdict(Outcome.NEAR_TIE, f"symmetric scene: {summary}, the one next to the motion prediction kept")
         return Verdict(Outcome.AMBIGUOUS, f"ambiguous: {summary}, none next to the motion prediction")
-    short = shortfall(leader, level, rules)
-    confirmed = level is not None and not short
+    unconfirmed = "no running level yet" if level is None else shortfall(leader, level, rules)
+    confirmed = not unconfirmed
     if not (confirmed and evidence.expected):
-        why = (short if short else "no running level yet" if level is None
-               else f"{evidence.offset[0]:.2f} m from the motion prediction")
+        why = unconfirmed or f"{evidence.offset[0]:.2f} m from the motion prediction"
         if not evidence.searched:
             return Verdict(Outcome.UNSETTLED, f"unconfirmed: {why}", Needs.SEARCH)
         if not (confirmed or evidence.expected or (level is None and not expected.moving)):
