@@ -116,6 +116,8 @@ class Verdict:
     stamp_ns: Optional[int]  # None when the node could not read the message's stamp
     level: int  # 0 OK, 1 flagged, 2 rejected
     rejected: str  # the kind, "" unless rejected
+    map_restarted: bool = False  # the node's map began again from this scan
+    message: str = ""  # why it was flagged ("ok" when not)
 
 
 class Probe:
@@ -149,7 +151,8 @@ class Probe:
     def _on_verdict(self, msg: DiagnosticStatus) -> None:
         values = {kv.key: kv.value for kv in msg.values}
         self.verdicts.append(Verdict(time.monotonic(), int(msg.name) if msg.name.lstrip("-").isdigit() else None,
-                                     msg.level[0], values.get("rejected", "")))
+                                     msg.level[0], values.get("rejected", ""),
+                                     values.get("map_restarted", "") == "True", msg.message))
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         for status in msg.status:

@@ -39,6 +39,7 @@ def live_run(sequence: Sequence, rate: Optional[float], overrides: Optional[Mapp
     if session.load() is None:
         raise RuntimeError(session.fatal_error)
     results: dict[int, StepResult] = {}
+    index_of = {stamp_ns: k for k, stamp_ns in enumerate(sequence.stamps_ns)}
     def handle(k: int, backlog: Optional[int], period_s: Optional[float] = None) -> None:
         scan = SimpleNamespace(points=sequence.scans[k], stamp_ns=sequence.stamps_ns[k], times=None)
         try:
@@ -48,6 +49,8 @@ def live_run(sequence: Sequence, rate: Optional[float], overrides: Optional[Mapp
             return
         results[k] = StepResult(step.pose, step.accepted, step.recovered, 1e3 * step.latency_s, step.reason,
                                 step.answer, step.map_restarted)
+        for stamp_ns in step.vouched_late:  # the node vouches for these now
+            results[index_of[stamp_ns]].accepted = True
 
     indices = range(len(sequence.scans))
     if rate is None:
@@ -80,7 +83,8 @@ def bag_sequence(path: Path) -> Sequence:
 def live_table(rows: list[dict[str, Any]]) -> str:
     """A markdown table: one row per sequence, method and rate."""
     out = ["| sequence | method | rate | processed | behind | latency p50 / p95 / p99 ms | step ms p50 / p95 "
-           "| ATE m | drift % | off accepted / flagged |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "| ATE m | drift % | off accepted / flagged | accepted right / wrong, flagged right / wrong |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def f(value: Any, fmt: str = ".0f") -> str:
         return "-" if value is None else format(value, fmt)
@@ -90,5 +94,7 @@ def live_table(rows: list[dict[str, Any]]) -> str:
         latency = " / ".join(f(r.get(f"latency_ms_p{q}")) for q in (50, 95, 99))
         out.append(f"| {r['sequence']} | {r['method']} | {rate} | {r['processed']} / {r['scans']} | "
                    f"{f(r['behind'])} | {latency} | {f(r['ms_p50'])} / {f(r['ms_p95'])} | {f(r['ate_m'], '.3f')} | "
-                   f"{f(r['end_drift_pct'], '.2f')} | {r['off_accepted']} / {r['off_flagged']} |")
+                   f"{f(r['end_drift_pct'], '.2f')} | {r['off_accepted']} / {r['off_flagged']} | "
+                   + " / ".join(f(r.get(k), "d") for k in ("accepted_right", "accepted_wrong", "flagged_right",
+                                                           "flagged_wrong")) + " |")
     return "\n".join(out)

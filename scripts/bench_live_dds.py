@@ -6,15 +6,17 @@ their own spacing (stamps in the past, so that no rate makes them run ahead of t
 process, with the package's Fast DDS profile on both sides (:mod:`benchmarks.dds_probe`). A first scan
 repeated warms the node up (engine loading, kernels), then ``~/reset`` starts a fresh map. Prints, per rate:
 scans published, odometry received, latency (publish to odometry) p50 / p95 / p99, and the ATE, end drift and
-steps off of what came out (scan_status OK = accepted), as scripts/bench_live.py does for the simulated queue.
+steps off of what came out (scan_status OK = accepted), and every step adjudicated (accepted / flagged, right /
+wrong against the data's own optimum too), as scripts/bench_live.py does for the simulated queue.
 
     python scripts/bench_live_dds.py --balm DIR --thinned 5000 --rates 1 8
     python scripts/bench_live_dds.py --bag bags/kitti_00_6scans.mcap --rates 1 2
-    python scripts/bench_live_dds.py --bag QUICK_SHACK_BAG --rates 1 --param queue_size:=32 threads:=1
+    python scripts/bench_live_dds.py --bag QUICK_SHACK_BAG --off 0.12 2 --rates 1 --param queue_size:=32 threads:=1
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -28,6 +30,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # runnable from a fresh checkout without `pip install`
     sys.path.insert(0, str(REPO))
 
+from benchmarks.adjudication import DataOptimum  # noqa: E402
 from benchmarks.dds_probe import Probe, cloud_message, dds_environment, node_log, serialized, stamped, start_node  # noqa: E402,E501
 from benchmarks.live import bag_sequence, live_table  # noqa: E402
 from benchmarks.real import Sequence, StepResult, balm_sequence, sequence_metrics  # noqa: E402
@@ -70,11 +73,17 @@ def play(probe: Probe, sequence: Sequence, msgs: list[bytearray], rate: float) -
     time.sleep(5.0)  # the queue drains
     arrivals = {stamp: t for t, stamp in probe.odometry}
     accepted = {v.stamp_ns: v.level == 0 for v in probe.verdicts}
+    restarted = {v.stamp_ns for v in probe.verdicts if v.map_restarted}
+    reasons = {v.stamp_ns: v.message for v in probe.verdicts}
     kept = [k for k, s in enumerate(stamps) if s in probe.poses]
     latencies = [1e3 * (arrivals[stamps[k]] - published[stamps[k]]) for k in kept]
-    results = [StepResult(probe.poses[stamps[k]], accepted.get(stamps[k], False), False, np.nan, "") for k in kept]
-    metrics = sequence_metrics(sequence.subset(kept), results) if kept else {}
-    accuracy = {k: metrics.get(k) for k in ("ate_m", "end_drift_pct", "off_accepted", "off_flagged")}
+    results = [StepResult(probe.poses[stamps[k]], accepted.get(stamps[k], False), False, np.nan,
+                          reasons.get(stamps[k], ""), restarted=stamps[k] in restarted) for k in kept]
+    processed = sequence.subset(kept)
+    metrics = sequence_metrics(processed, results, DataOptimum(processed.scans)) if kept else {}
+    accuracy = {k: metrics.get(k) for k in ("ate_m", "end_drift_pct", "off_accepted", "off_flagged",
+                                            "accepted_right", "accepted_wrong", "flagged_right", "flagged_wrong",
+                                            "accepted_wrong_steps")}
     return {"rate": rate, "scans": len(msgs), "processed": len(kept), "behind": None,
             **latency_percentiles(latencies), "ms_p50": None, "ms_p95": None, **accuracy}
 
@@ -85,6 +94,9 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--thinned", type=int, metavar="N", help="BALM thinned to N random points per scan")
     parser.add_argument("--bag", type=Path, help="a bag with ground truth instead of BALM")
     parser.add_argument("--rates", type=float, nargs="+", default=[1.0, 4.0])
+    parser.add_argument("--off", type=float, nargs=2, metavar=("M", "DEG"),
+                        help="a step wrong by more than this (a bag carries no thresholds: give its set's, "
+                             "../shared/real_sets/README.md; default: benchmarks.real's)")
     parser.add_argument("--param", nargs="+", default=[], metavar="NAME:=VALUE",
                         help="node parameters under test (docs/node.md), as ros2 run's -p takes them")
     parser.add_argument("--out", type=Path, default=REPO / "results" / "bench_live_dds.json")
@@ -95,6 +107,8 @@ def main(argv: Optional[list[str]] = None) -> int:
     if (args.balm is None) == (args.bag is None):
         parser.error("give --balm DIR or --bag BAG")
     sequence = bag_sequence(args.bag) if args.bag else balm_sequence(args.balm)
+    if args.off:
+        sequence = dataclasses.replace(sequence, off=tuple(args.off))
     if args.thinned:
         sequence = sequence.keyframes(1, args.thinned)
     msgs = messages(sequence)

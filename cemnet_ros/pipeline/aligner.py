@@ -17,8 +17,9 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
    the running level; a failed one is published flagged with the prediction and changes nothing else
    (too many in a row restart the map, where :mod:`.steps.lost_streak` says, and the level with it); a
    degenerate one keeps the prediction along the unconstrained directions, is flagged, and still extends the map;
-   a near-tie, or an unconfirmed one (a live scan without time for the search, :mod:`.steps.scan_budget`), is
-   flagged and moves the pose and the level only. The step's covariance is its
+   a near-tie is flagged and moves the pose and the level only; an unconfirmed one (a live scan without time for
+   the search, :mod:`.steps.scan_budget`) is flagged and joins the map unvouched, checked by the search beside
+   the worker (:mod:`.unvouched`). The step's covariance is its
    registration's plus the previous pose's error against the map (:func:`~.steps.covariance.carried_into_step`).
 
 Pair mode (:mod:`.pair_mode`) runs steps 0-4 against a map of the target cloud. Poses are ``T_odom_sensor``;
@@ -26,6 +27,8 @@ odom is the first scan's sensor frame. Units: see :mod:`.steps.frame`.
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
 import time
 from typing import Callable, Optional
 
@@ -41,18 +44,20 @@ from cemnet_ros.pipeline.pair_mode import PairMode
 from cemnet_ros.pipeline.steps import preprocess, refine
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.alignment_step import AlignmentStep
+from cemnet_ros.pipeline.steps.answer import distinct
 from cemnet_ros.pipeline.steps.covariance import carried_into_step
-from cemnet_ros.pipeline.steps.decision import Outcome
+from cemnet_ros.pipeline.steps.decision import Outcome, Verdict
 from cemnet_ros.pipeline.steps.frame import Frame, Preprocessor
-from cemnet_ros.pipeline.steps.health import RunningLevel
+from cemnet_ros.pipeline.steps.health import RunningLevel, disagreement
 from cemnet_ros.pipeline.steps.input_checks import InputChecks
 from cemnet_ros.pipeline.steps.lost_streak import LostStreak
 from cemnet_ros.pipeline.steps.metric_cem import MetricEngine, prior_registrar
 from cemnet_ros.pipeline.steps.motion import ConstantVelocity
-from cemnet_ros.pipeline.steps.registration import Registered, Registration
+from cemnet_ros.pipeline.steps.registration import EARLY, Registered, Registration
 from cemnet_ros.pipeline.steps.scan_budget import ScanBudget
 from cemnet_ros.pipeline.steps.sweep import SweepDeskewer
 from cemnet_ros.pipeline.threads import bound_threads
+from cemnet_ros.pipeline.unvouched import Check, Unvouched, UnvouchedScan
 
 FIRST_PAIR, REQUESTED = "first pair", "requested"  # why a scan runs the global search whatever its budget
 
@@ -77,6 +82,7 @@ class ScanAligner:
         self._registration = Registration(self.config, engine, self._spread)
         self._sweep = SweepDeskewer(self.config.preprocess.deskew, self._preprocessor)
         self._pairs = PairMode(self.config, self._preprocessor, self._checks, self._registration)
+        self._unvouched = Unvouched()
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
         refine.compile_kernels()
         self.reset()
@@ -100,6 +106,12 @@ class ScanAligner:
         """T_odom_sensor of the last scan (the identity before the first)."""
         return self._pose.copy()
 
+    @property
+    def checking(self) -> bool:
+        """A check of an unconfirmed step runs beside the worker, or ended and waits for the next scan
+        (:mod:`.unvouched`)."""
+        return self._unvouched.checking
+
     def reset(self, T_odom_sensor: Optional[np.ndarray] = None) -> None:
         """Forget the map and the motion model (the auto scale is measured again); the next scan starts a new
         trajectory at ``T_odom_sensor`` (default: the identity; pass :attr:`pose` to keep odom continuous)."""
@@ -117,6 +129,7 @@ class ScanAligner:
         self._sweep.reset()
         self._pairs.reset()
         self._checks.forget_frame()
+        self._unvouched.clear()
 
     def request_recovery(self) -> None:
         """Run the global search on the next scan (e.g. the robot was carried: a ``~/relocalize`` service)."""
@@ -145,6 +158,7 @@ class ScanAligner:
         points, offset_ns, self._map = self._sweep.deskewed(admitted.points, admitted.times, stamp_ns,
                                                             self._motion.velocity, self._motion.last_stamp, self._map)
         step = self._process_at(points, stamp_ns + offset_ns, start, effort, self._budget(start, budget_s))
+        step.vouched_late = [stamp - offset_ns for stamp in step.vouched_late]  # as they were published
         self._checks.passed(admitted)
         step.warnings, step.effort = admitted.warnings, effort
         return self._sweep.at_stamp(step, stamp_ns, offset_ns, self._motion.velocity, self._motion.has_velocity)
@@ -171,12 +185,75 @@ class ScanAligner:
             return self._held(stamp_ns, start, frame, "duplicate stamp: scan skipped")
         if self._map is None or last_stamp is None or stamp_ns < last_stamp:
             return self._start_trajectory(frame, stamp_ns, start)
+        settled, vouched_late = self._settle_check()
         T_predicted = self._pose @ self._motion.predict_relative(stamp_ns)
-        registered = self._registration.register(
-            frame, self._map, T_predicted, level=self._level.level, search_because=self._pending_recovery,
-            T_last=self._pose, dt_ratio=self._motion.dt_ratio(stamp_ns), effort=effort,
-            moving=self._motion.has_velocity, T_fallback=self._T_odom_last_insert, budget=budget)
-        return self._commit(frame, stamp_ns, T_predicted, registered, start)
+        level, why, T_last, T_fallback = self._level.level, self._pending_recovery, self._pose, self._T_odom_last_insert
+        dt_ratio, moving = self._motion.dt_ratio(stamp_ns), self._motion.has_velocity
+
+        def plan(registration: Registration, target_map: VoxelMap, effort: float = 1.0,
+                 budget: Optional[ScanBudget] = None) -> Registered:
+            """This scan's plan against ``target_map`` (the live map, or a snapshot of it beside the worker)."""
+            return registration.register(frame, target_map, T_predicted, level=level, search_because=why,
+                                         T_last=T_last, dt_ratio=dt_ratio, effort=effort, moving=moving,
+                                         T_fallback=T_fallback, budget=budget)
+
+        registered = plan(self._registration, self._map, effort, budget)
+        check = self._check(plan) if registered.verdict.outcome == Outcome.UNCONFIRMED else None
+        registered = self._held_back(registered)
+        step = self._commit(frame, stamp_ns, T_predicted, registered, start, settled)
+        step.vouched_late = vouched_late
+        if registered.verdict.outcome == Outcome.UNCONFIRMED:
+            self._unvouched.add(UnvouchedScan(stamp_ns, frame, self._pose.copy(), check))
+        if effort >= 1.0:  # a worker behind its input has no time to spare for a check beside it
+            self._unvouched.start_check()
+        return step
+
+    def _check(self, plan: Callable[[Registration, VoxelMap], Registered]) -> Check:
+        """The check of a scan unconfirmed on its own evidence: its ``plan`` beside the worker, against the map as
+        the scan saw it (its commit is about to take the scan in) with the motion spread as it saw it."""
+        assert self._map is not None
+        map_before = self._map.snapshot()
+        beside = Registration(self.config, self._registration.engine, copy.deepcopy(self._spread))
+        return Check(map_before, self._T_odom_last_insert, lambda: plan(beside, map_before))
+
+    def _held_back(self, registered: Registered) -> Registered:
+        """An accepted step registered against a map that holds unvouched scans: unconfirmed until they are
+        vouched for (:mod:`.unvouched`)."""
+        if registered.verdict.outcome != Outcome.ACCEPTED or not self._unvouched:
+            return registered
+        oldest = self._unvouched.oldest.stamp_ns * 1e-9
+        return dataclasses.replace(registered, verdict=Verdict(Outcome.UNCONFIRMED, (
+            f"unconfirmed: the map holds {len(self._unvouched)} scans the search has yet to vouch for (the first at "
+            f"{oldest:.3f} s)")))
+
+    def _settle_check(self) -> tuple[str, list[int]]:
+        """Take in the check beside the worker that ended since the last scan (:mod:`.unvouched`): what it did, for
+        this step's reason ("": none ended), and the stamps of the steps it vouched for."""
+        finished = self._unvouched.finished()
+        return ("", []) if finished is None else self._settle(*finished)
+
+    def _settle(self, scan: UnvouchedScan, registered: Registered) -> tuple[str, list[int]]:
+        """The outcome of ``scan``'s check (see :mod:`.unvouched`)."""
+        at = f"the step at {scan.stamp_ns * 1e-9:.3f} s"
+        T_checked, stands = registered.T_odom_sensor, registered.verdict.outcome in EARLY
+        if stands and T_checked is not None and not distinct(T_checked, scan.T_inserted):
+            return f"{at} confirmed by the search beside the worker", self._unvouched.vouched(scan)
+        before = self._unvouched.before
+        self._map, self._T_odom_last_insert = before.map_before, before.T_last_insert_before
+        self._unvouched.clear()
+        if not stands or T_checked is None:
+            self._pending_recovery = f"the search beside the worker did not confirm {at}"
+            return (f"{at} not confirmed by the search beside the worker ({registered.verdict.outcome.value}): "
+                    "the map goes back to the one last vouched for"), []
+        T_correction = T_checked @ np.linalg.inv(scan.T_inserted)
+        self._pose = T_correction @ self._pose
+        self._motion.moved(T_correction)
+        self._sweep.moved(T_correction)
+        self._insert(scan.frame, T_checked)
+        metres, radians = disagreement(scan.T_inserted, T_checked)
+        return (f"the search beside the worker placed {at} {metres:.2f} m, {np.degrees(radians):.1f} deg from its "
+                "answer: the map goes back to the one last vouched for and takes it in there, the pose moves with "
+                "it"), []
 
     def _start_trajectory(self, frame: Frame, stamp_ns: int, start: float) -> AlignmentStep:
         """The first scan (or one whose stamp went back): the map restarts from it, the pose is kept."""
@@ -203,13 +280,15 @@ class ScanAligner:
         self._pose_vs_map = np.zeros((6, 6))  # the map is this scan where it is: no error against it
         self._sweep.map_restarted(T_odom_sensor)
         self._level.reset()  # what right answers fit depends on the scene: the new map's steps set it again
+        self._unvouched.clear()
         self._pending_recovery = ""
         self._failures_in_a_row = 0
         self._lost.reset()
 
     def _commit(self, frame: Frame, stamp_ns: int, T_predicted: np.ndarray, registered: Registered,
-                start: float) -> AlignmentStep:
-        """Apply the outcome (see the module): a failed step publishes the prediction, the others their answer."""
+                start: float, settled: str = "") -> AlignmentStep:
+        """Apply the outcome (see the module): a failed step publishes the prediction, the others their answer;
+        ``settled``: what the check beside the worker did before it (its reason's last part)."""
         verdict, previous, answered = registered.verdict, self._pose, registered.T_odom_sensor
         if verdict.failed or answered is None:
             covariance = self._covariance(registered, T_predicted)
@@ -218,6 +297,7 @@ class ScanAligner:
             covariance = self._covariance(registered, answered)
             pose, reasons, restarted = answered, [verdict.reason] if verdict.reason else [], False
             self._extend(frame, pose, T_predicted, registered)
+        reasons += [settled] if settled else []
         self._pose = pose
         self._motion.update(pose, stamp_ns)
         return AlignmentStep.registered(
@@ -255,9 +335,9 @@ class ScanAligner:
                       f"lost for {self.config.recovery.restart_after} scans: the map restarts from this scan"], True
 
     def _extend(self, frame: Frame, pose: np.ndarray, T_predicted: np.ndarray, registered: Registered) -> None:
-        """A step that is not failed: the fitness level takes it in; the map and the prediction errors a vouched
-        (or degenerate) one, not a near-tie or an unconfirmed one, which move the pose and the level only (a map
-        grown at a guess would mislead every later scan)."""
+        """A step that is not failed: the fitness level takes it in; the map and the prediction errors every one
+        but a near-tie, which moves the pose and the level only (a map grown at a guess among equals would mislead
+        every later scan; an unconfirmed answer goes in unvouched, :mod:`.unvouched`)."""
         assert self._map is not None  # a step is only committed against the map it was registered on
         self._pending_recovery = ""
         self._failures_in_a_row = 0
@@ -265,14 +345,19 @@ class ScanAligner:
         leader = registered.evidence.leader
         assert leader is not None  # a step that is not failed has an answer
         self._level.accept(leader.signals)  # near-ties too: equals fit alike, and that is what this scene gives
-        if registered.verdict.outcome in (Outcome.NEAR_TIE, Outcome.UNCONFIRMED):
+        if registered.verdict.outcome == Outcome.NEAR_TIE:
             return
         if not registered.searched:  # a search's guess was no prediction of the motion model
             self._spread.update(np.linalg.inv(T_predicted) @ pose)
+        self._insert(frame, pose)
+        self._sweep.inserted(pose)
+
+    def _insert(self, frame: Frame, pose: np.ndarray) -> None:
+        """The frame into the map at ``pose``."""
+        assert self._map is not None
         self._map.update(apply_transform(pose, frame.dense), pose[:3, 3],
                          self._scan_cloud(frame, self._map.gicp_voxel, pose))
         self._T_odom_last_insert = pose.copy()
-        self._sweep.inserted(pose)
 
     @staticmethod
     def _scan_cloud(frame: Frame, voxel: float, T_odom_sensor: np.ndarray) -> Callable[[], GicpCloud]:

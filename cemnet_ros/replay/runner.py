@@ -86,7 +86,7 @@ def _step_record(index: int, step, out: OdometryOutput) -> dict:
             "reason": step.reason, "latency_s": step.latency_s, "n_points": step.n_points,
             "first": step.relative is None, "recovered": step.recovered, "recovery_reason": step.recovery_reason,
             "degenerate": step.degenerate, "signals": step.signals, "origin": step.origin, "effort": step.effort,
-            "polishes": step.polishes, "twist_known": out.twist_known,
+            "polishes": step.polishes, "vouched_late": step.vouched_late, "twist_known": out.twist_known,
             "linear_m_s": out.linear.tolist(), "angular_rad_s": out.angular.tolist()}
 
 

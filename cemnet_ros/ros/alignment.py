@@ -164,6 +164,8 @@ class Alignment:
             self._report(self._scan_status.rejected(exc.kind, str(exc), _stamp_of(item)))
             return
         self.status.scan_frame(source.msg.header.frame_id)  # a registered scan's: not a foreign, refused one
+        for stamp_ns in result.step.vouched_late:
+            self._report(self._scan_status.vouched_late(stamp_ns))
         self._report(self._scan_status.step(result.step))
         self._outputs.step(result, source, frame)
         self._extrinsic.output_published()

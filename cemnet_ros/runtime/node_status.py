@@ -66,6 +66,7 @@ class NodeStatus:
         self._first_input: Optional[float] = None
         self.published = 0
         self.flagged = 0
+        self.vouched_late = 0  # flagged steps the search beside the worker confirmed later
         self.recoveries = 0
         self.ready = False  # the engine has loaded
         self.last_step: Any = None
@@ -115,6 +116,10 @@ class NodeStatus:
             self.recoveries += int(step.recovered)
             self.flagged += int(not step.accepted)
 
+    def vouched_late_done(self) -> None:
+        with self._lock:
+            self.vouched_late += 1
+
     def input_age(self) -> Optional[float]:
         """Seconds since the last input (None: none yet)."""
         with self._lock:
@@ -144,6 +149,7 @@ class NodeStatus:
         with self._lock:
             now = self._clock()
             rejected, flagged, step, recoveries = dict(self.rejected), self.flagged, self.last_step, self.recoveries
+            vouched_late = self.vouched_late
             warned, published, received = dict(self.warned), self.published, self.received
             standing = dict(self.standing)
             last = self._arrivals.times[-1] if self._arrivals.times else None
@@ -164,7 +170,8 @@ class NodeStatus:
             "latency_last_ms": round(queue.latency_last_s * 1e3, 1),
             "latency_mean_ms": round(queue.latency_mean_s * 1e3, 1),
             "latency_max_ms": round(queue.latency_max_s * 1e3, 1),
-            "recoveries": recoveries, "flagged_steps": flagged, "rejected_inputs": counts[0],
+            "recoveries": recoveries, "flagged_steps": flagged, "vouched_late": vouched_late,
+            "rejected_inputs": counts[0],
             "scale_m_per_unit": "" if scale is None else round(scale, 4),
         }
         for name in ("fitness", "accepted", "reason", "recovered", "recovery_reason", "degenerate"):

@@ -2,9 +2,11 @@
 
 Every input message gets one verdict (diagnostic_msgs levels): OK for a good step, WARN for a flagged one (still
 published), ERROR for a rejected input or a scan whose processing raised; its name is the message's stamp in ns
-("" when the stamp could not be read). Each is counted in :class:`~.node_status.NodeStatus`. Log warnings are
-throttled per kind (rclpy's ``throttle_duration_sec`` throttles per call site, which would hide a second kind
-of bad input behind the first); the first error of each exception type is logged with its traceback.
+("" when the stamp could not be read). A flagged step that the search beside the worker confirms later gets a
+second verdict, OK (``vouched_late``), when the node vouches for it. Each is counted in
+:class:`~.node_status.NodeStatus`. Log warnings are throttled per kind (rclpy's ``throttle_duration_sec``
+throttles per call site, which would hide a second kind of bad input behind the first); the first error of each
+exception type is logged with its traceback.
 """
 from __future__ import annotations
 
@@ -85,9 +87,15 @@ class ScanStatus:
         if not step.accepted:
             lines += self.throttled("flagged", f"step at {step.stamp_ns * 1e-9:.3f} s flagged: {step.reason}")
         values = {"fitness": round(step.fitness, 4), "recovered": step.recovered, "origin": step.origin,
-                  "effort": step.effort, "polishes": step.polishes,
+                  "effort": step.effort, "polishes": step.polishes, "map_restarted": step.map_restarted,
                   "warnings": "; ".join(f"[{kind}] {text}" for kind, text in step.warnings)}
         return Outcome(ScanVerdict(step.stamp_ns, OK if step.accepted else WARN, step.reason or "ok", values), lines)
+
+    def vouched_late(self, stamp_ns: int) -> Outcome:
+        """An earlier step, published flagged, that the node now vouches for (counted: ``vouched_late``)."""
+        self.status.vouched_late_done()
+        return Outcome(ScanVerdict(stamp_ns, OK, "vouched for late: the search beside the worker confirmed it",
+                                   {"vouched_late": True}), [])
 
     def error(self, exc: BaseException, stamp_ns: Optional[int]) -> Outcome:
         """A scan whose processing raised (a bug to report): an ERROR verdict, so that no scan goes unreported."""

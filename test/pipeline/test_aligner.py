@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from cemnet_ros.pipeline.aligner import ScanAligner
 from cemnet_ros.pipeline.config import AlignerConfig, InputChecksConfig, PreprocessConfig, TrackingConfig
 from cemnet_ros.pipeline.errors import ScanRejected
 from cemnet_ros.pipeline.steps.covariance import moved_by
+from cemnet_ros.pipeline.steps.decision import Outcome, Verdict
 from cemnet_ros.pipeline.steps.preprocess import robust_radius
 from cemnet_ros.pipeline.steps.registration import Registration
 from cemnet_ros.pipeline.steps.starts import Starts
@@ -185,30 +187,81 @@ def test_a_stop_in_a_stamp_gap_stands_after_the_search_and_so_does_a_jump_beyond
     assert within(*step_error(poses, steps, 4), 0.05, 0.2)
 
 
-def test_a_live_scan_without_time_for_the_search_publishes_its_answer_unconfirmed_and_the_next_tracks_on():
-    aligner = ScanAligner(DEFAULT)
-    poses = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(4)] + [make_transform(t=(1.5, 0.0, 0.0))]
-    gap = 2_000_000_000  # a stop in a gap: the answer is no prediction's, it waits for the search (as offline)
-    stamps = [0, PERIOD, 2 * PERIOD, 2 * PERIOD + gap, 3 * PERIOD + gap]
-    rng = np.random.default_rng(2)
-    steps = []
-    for k, (pose, stamp) in enumerate(zip(poses, stamps)):
-        if k == 3:
-            map_size = len(aligner.local_map)
-        steps.append(aligner.process(street_scan(WORLD, pose, rng), stamp, budget_s=1e-6 if k > 1 else None))
-        if k == 3:
-            assert len(aligner.local_map) == map_size  # the map waits for a vouched step
+STOP_POSES = [make_transform(t=(0.5 * k, 0.0, 0.0)) for k in range(4)] + [make_transform(t=(1.5, 0.0, 0.0))]
+STOP_STAMPS = [0, PERIOD, 2 * PERIOD, 2 * PERIOD + 2_000_000_000, 3 * PERIOD + 2_000_000_000]
+
+
+def live_stop_in_a_gap(aligner, rng, scans):
+    """The street driven live with no time for the search (the first pair aside): a stop in a gap leaves the
+    fourth scan's answer waiting for the search (offline it stands after it)."""
+    return [aligner.process(street_scan(WORLD, STOP_POSES[k], rng), STOP_STAMPS[k], budget_s=1e-6 if k > 1 else None)
+            for k in scans]
+
+
+def wait_for_the_check(aligner, timeout_s=120.0):
+    """Until the check beside the worker has ended (the next scan takes it in)."""
+    deadline = time.monotonic() + timeout_s
+    while not aligner._unvouched._side._running[1].done():
+        assert time.monotonic() < deadline, "the check beside the worker did not end"
+        time.sleep(0.01)
+
+
+def test_a_live_scan_without_time_for_the_search_is_unconfirmed_joins_the_map_and_is_vouched_for_late():
+    aligner, rng = ScanAligner(DEFAULT), np.random.default_rng(2)
+    steps = live_stop_in_a_gap(aligner, rng, range(3))
+    map_size = len(aligner.local_map)
+    steps += live_stop_in_a_gap(aligner, rng, [3])
     assert steps[1].recovered and steps[1].accepted  # the first pair's search: its cost is learnt
     unconfirmed = steps[3]
     assert unconfirmed.outcome == "unconfirmed" and not unconfirmed.accepted and not unconfirmed.recovered
     assert "does not fit the scan's budget" in unconfirmed.reason, unconfirmed.reason
-    assert within(*step_error(poses, steps, 3), 0.03, 0.15)  # the answer is published (flagged), not the prediction
-    assert steps[4].accepted and not steps[4].recovered, steps[4].reason  # tracked on from it
-    assert within(*step_error(poses, steps, 4), 0.03, 0.15)
+    assert within(*step_error(STOP_POSES, steps, 3), 0.03, 0.15)  # the answer is published (flagged)
+    assert len(aligner.local_map) > map_size and aligner.checking  # in the map, unvouched, checked beside
+    wait_for_the_check(aligner)
+    steps += live_stop_in_a_gap(aligner, rng, [4])
+    assert "confirmed by the search beside the worker" in steps[4].reason, steps[4].reason
+    assert steps[4].vouched_late == [steps[3].stamp_ns]  # the node vouches for the unconfirmed step now
+    assert steps[4].accepted and within(*step_error(STOP_POSES, steps, 4), 0.03, 0.15), steps[4].reason
     aligner.reset(aligner.pose)  # a new first pair: its search runs whatever the budget
-    first, second = (aligner.process(street_scan(WORLD, pose, rng), 10 * gap + k * PERIOD, budget_s=1e-6)
-                     for k, pose in enumerate(poses[:2]))
+    first, second = (aligner.process(street_scan(WORLD, pose, rng), 100 * PERIOD + k * PERIOD, budget_s=1e-6)
+                     for k, pose in enumerate(STOP_POSES[:2]))
     assert second.recovered and second.accepted and second.recovery_reason == "first pair", second.reason
+
+
+def test_a_step_registered_while_the_map_holds_an_unvouched_scan_is_flagged_until_the_check_settles():
+    aligner, rng = ScanAligner(DEFAULT), np.random.default_rng(2)
+    steps = live_stop_in_a_gap(aligner, rng, range(4))
+    aligner._unvouched.finished = lambda: None  # the check has not ended yet
+    held = live_stop_in_a_gap(aligner, rng, [4])[0]
+    assert steps[3].outcome == "unconfirmed" and held.outcome == "unconfirmed" and not held.accepted
+    assert "the map holds 1 scans the search has yet to vouch for" in held.reason, held.reason
+    assert held.vouched_late == []
+
+
+@pytest.mark.parametrize("placed_elsewhere", [True, False])
+def test_a_check_that_does_not_confirm_takes_the_map_back_to_the_one_last_vouched_for(placed_elsewhere):
+    aligner, rng = ScanAligner(DEFAULT), np.random.default_rng(2)
+    live_stop_in_a_gap(aligner, rng, range(3))
+    vouched_size = len(aligner.local_map)
+    live_stop_in_a_gap(aligner, rng, [3])
+    wait_for_the_check(aligner)
+    scan, checked = aligner._unvouched.finished()
+    shift = make_transform(t=(0.4, 0.0, 0.0))
+    if placed_elsewhere:  # the check's answer stands 0.4 m from the one taken in
+        checked = dataclasses.replace(checked, T_odom_sensor=shift @ scan.T_inserted)
+    else:
+        checked = dataclasses.replace(checked, verdict=Verdict(Outcome.FAILED, "no answer stands"))
+    aligner._unvouched.finished = lambda: (scan, checked)
+    pose_before = aligner.pose
+    note, vouched = aligner._settle_check()
+    assert "the map goes back to the one last vouched for" in note and vouched == [], note
+    if placed_elsewhere:  # the scan went in where the check placed it; the pose moved by the same correction
+        assert "placed the step" in note and len(aligner.local_map) > vouched_size
+        np.testing.assert_allclose(aligner.pose, shift @ pose_before, atol=1e-9)
+    else:  # the map the node last vouched for, unchanged; the next scan runs the search
+        assert len(aligner.local_map) == vouched_size
+        np.testing.assert_array_equal(aligner.pose, pose_before)
+        assert aligner._pending_recovery.startswith("the search beside the worker did not confirm")
 
 
 def test_a_car_that_keeps_its_speed_through_a_gap_of_a_second_is_tracked_from_the_prediction():

@@ -28,8 +28,8 @@ def _record(result) -> dict:
     return {"stamp_ns": step.stamp_ns, "fitness": step.fitness, "accepted": step.accepted, "reason": step.reason,
             "n_points": step.n_points, "first": step.relative is None, "recovered": step.recovered,
             "recovery_reason": step.recovery_reason, "degenerate": step.degenerate, "signals": step.signals,
-            "origin": step.origin, "effort": step.effort, "polishes": step.polishes, "twist_known": out.twist_known,
-            "linear_m_s": out.linear.tolist(), "angular_rad_s": out.angular.tolist()}
+            "origin": step.origin, "effort": step.effort, "polishes": step.polishes, "vouched_late": step.vouched_late,
+            "twist_known": out.twist_known, "linear_m_s": out.linear.tolist(), "angular_rad_s": out.angular.tolist()}
 
 
 def test_replay_and_node_session_give_the_same_poses_and_step_records(tiny_bag, tmp_path):

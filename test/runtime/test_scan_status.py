@@ -20,10 +20,11 @@ def _scan_status():
     return ScanStatus(NodeStatus(1.0, clock=clock), period_s=5.0, clock=clock), clock
 
 
-def _step(accepted=True, warnings=()):
+def _step(accepted=True, warnings=(), map_restarted=False):
     return SimpleNamespace(stamp_ns=2_500_000_000, accepted=accepted, reason="" if accepted else "low fitness",
                            fitness=0.812345, recovered=False, warnings=list(warnings), recovery_reason="",
-                           degenerate=False, origin="prediction" if accepted else "", effort=0.5, polishes=2)
+                           degenerate=False, origin="prediction" if accepted else "", effort=0.5, polishes=2,
+                           map_restarted=map_restarted)
 
 
 def test_warnings_are_throttled_per_kind_not_per_call_site():
@@ -56,10 +57,11 @@ def test_steps_are_ok_or_flagged_and_carry_their_input_warnings():
     good = scan_status.step(_step(warnings=[("decimated", "kept 1 in 2")]))
     assert (good.verdict.level, good.verdict.message, good.verdict.stamp_ns) == (OK, "ok", 2_500_000_000)
     assert good.verdict.values == {"fitness": 0.8123, "recovered": False, "origin": "prediction", "effort": 0.5,
-                                   "polishes": 2, "warnings": "[decimated] kept 1 in 2"}
+                                   "polishes": 2, "map_restarted": False, "warnings": "[decimated] kept 1 in 2"}
     assert good.warnings == ["[decimated] kept 1 in 2 (1 so far)"]
-    flagged = scan_status.step(_step(accepted=False))
+    flagged = scan_status.step(_step(accepted=False, map_restarted=True))
     assert (flagged.verdict.level, flagged.verdict.message) == (WARN, "low fitness")
+    assert flagged.verdict.values["map_restarted"] is True  # a consumer sees where the odometry's map began again
     assert flagged.warnings == ["step at 2.500 s flagged: low fitness"]
     counts = scan_status.status
     assert counts.published == 2 and counts.flagged == 1 and counts.warned["decimated"] == 1
@@ -81,3 +83,12 @@ def test_the_first_error_of_each_type_comes_with_its_traceback():
     assert other.error is not None and other.verdict.stamp_ns is None
     assert (first.verdict.level, first.verdict.values) == (ERROR, {"error": "IndexError"})
     assert first.warnings and not again.warnings  # the error warning is throttled like any other
+
+
+def test_a_flagged_step_confirmed_later_gets_a_second_verdict_ok_and_is_counted():
+    scan_status, _ = _scan_status()
+    scan_status.step(_step(accepted=False))
+    late = scan_status.vouched_late(2_500_000_000)
+    assert (late.verdict.level, late.verdict.stamp_ns, late.verdict.values) == (OK, 2_500_000_000,
+                                                                              {"vouched_late": True})
+    assert late.warnings == [] and scan_status.status.vouched_late == 1 and scan_status.status.flagged == 1

@@ -63,6 +63,10 @@ class ConstantVelocity:
         self._poses = (self._poses + [np.array(pose, dtype=np.float64)])[-2:]
         self._stamps = (self._stamps + [int(stamp_ns)])[-2:]
 
+    def moved(self, T_correction: np.ndarray) -> None:
+        """The recorded poses moved by ``T_correction`` (odom frame, from the left): the motion between them kept."""
+        self._poses = [T_correction @ pose for pose in self._poses]
+
     def dt_ratio(self, stamp_ns: int) -> float:
         """The time step to ``stamp_ns`` over the usual one (1 while none is known)."""
         last = self.last_stamp

@@ -84,6 +84,13 @@ class SweepDeskewer:
             else:
                 self._inserted.append((*self._skewed_input, T_odom_sensor.copy()))
 
+    def moved(self, T_correction: np.ndarray) -> None:
+        """The trajectory moved by ``T_correction`` (the internal odom frame, from the left): the last pose
+        published moves with it, so that the next step's motion does not count the move."""
+        if self._published is not None:
+            fix = np.eye(4) if self._odom_fix is None else self._odom_fix
+            self._published = fix @ T_correction @ np.linalg.inv(fix) @ self._published
+
     def _redeskewed_map(self, twist: np.ndarray) -> Optional[VoxelMap]:
         """The map rebuilt from its scans (all of them went in undeskewed) deskewed at the first velocity known;
         None when one of them no longer passes preprocessing (the map is kept as it is)."""
