@@ -72,7 +72,7 @@ def play(probe: Probe, sequence: Sequence, msgs: list[bytearray], rate: float) -
         probe.pub.publish(stamped(msg, stamps[k]))
     time.sleep(5.0)  # the queue drains
     arrivals = {stamp: t for t, stamp in probe.odometry}
-    accepted = {v.stamp_ns: v.level == 0 for v in probe.verdicts}
+    accepted = {v.stamp_ns: v.level == 0 for v in probe.verdicts}  # in order: a late OK overrides the flag
     restarted = {v.stamp_ns for v in probe.verdicts if v.map_restarted}
     reasons = {v.stamp_ns: v.message for v in probe.verdicts}
     kept = [k for k, s in enumerate(stamps) if s in probe.poses]

@@ -106,12 +106,6 @@ class ScanAligner:
         """T_odom_sensor of the last scan (the identity before the first)."""
         return self._pose.copy()
 
-    @property
-    def checking(self) -> bool:
-        """A check of an unconfirmed step runs beside the worker, or ended and waits for the next scan
-        (:mod:`.unvouched`)."""
-        return self._unvouched.checking
-
     def reset(self, T_odom_sensor: Optional[np.ndarray] = None) -> None:
         """Forget the map and the motion model (the auto scale is measured again); the next scan starts a new
         trajectory at ``T_odom_sensor`` (default: the identity; pass :attr:`pose` to keep odom continuous)."""

@@ -37,8 +37,9 @@ class SideSearch(Generic[Key]):
     def start(self, key: Key, register: Callable[[], Registered]) -> None:
         """Run ``register`` beside the worker; :meth:`finished` hands back its result with ``key``."""
         if self._executor is None:
-            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cemnet-side-search")
-        self._running = (key, self._executor.submit(_bounded, register))
+            self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cemnet-side-search",
+                                                initializer=_bound_this_thread)
+        self._running = (key, self._executor.submit(register))
 
     def finished(self) -> Optional[tuple[Key, Registered]]:
         """The registration that ended since the last call (None: none ended); an error raised in it is raised
@@ -54,12 +55,12 @@ class SideSearch(Generic[Key]):
         self._running = None
 
 
-def _bounded(register: Callable[[], Registered]) -> Registered:
-    """``register()`` on :data:`THREADS` numba threads, at :data:`NICENESS` where the system allows it."""
+def _bound_this_thread() -> None:
+    """The side thread's bounds, set once when it starts: :data:`THREADS` numba threads, :data:`NICENESS` where
+    the system allows it."""
     numba.set_num_threads(min(THREADS, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
     if hasattr(os, "setpriority"):
         try:
             os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICENESS)  # Linux: this thread alone
         except OSError:
             pass
-    return register()

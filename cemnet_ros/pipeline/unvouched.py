@@ -66,11 +66,6 @@ class Unvouched:
         return len(self._scans)
 
     @property
-    def checking(self) -> bool:
-        """A check runs beside the worker, or ended and waits to be taken in."""
-        return self._side.busy
-
-    @property
     def oldest(self) -> UnvouchedScan:
         """The oldest unvouched scan: the map before it is the map the node last vouched for."""
         return self._scans[0]

@@ -216,7 +216,7 @@ def test_a_live_scan_without_time_for_the_search_is_unconfirmed_joins_the_map_an
     assert unconfirmed.outcome == "unconfirmed" and not unconfirmed.accepted and not unconfirmed.recovered
     assert "does not fit the scan's budget" in unconfirmed.reason, unconfirmed.reason
     assert within(*step_error(STOP_POSES, steps, 3), 0.03, 0.15)  # the answer is published (flagged)
-    assert len(aligner.local_map) > map_size and aligner.checking  # in the map, unvouched, checked beside
+    assert len(aligner.local_map) > map_size and aligner._unvouched._side.busy  # in the map, unvouched, checked
     wait_for_the_check(aligner)
     steps += live_stop_in_a_gap(aligner, rng, [4])
     assert "confirmed by the search beside the worker" in steps[4].reason, steps[4].reason

@@ -35,7 +35,7 @@ class AlignmentStep:
     polishes: int = 0  # answers polished and judged for this scan (the cost of its decision)
     answer: Optional[np.ndarray] = None  # (4, 4) the registered answer judged, also when flagged (None: none)
     map_restarted: bool = False  # the map restarted from this scan (the first scan, or lost)
-    vouched_late: list = field(default_factory=list)  # stamps (ns) of earlier steps, published flagged, that the
+    vouched_late: list[int] = field(default_factory=list)  # stamps (ns) of earlier steps, published flagged, that the
     # search beside the worker has since confirmed (:mod:`..unvouched`): the node vouches for them now
 
     @property
