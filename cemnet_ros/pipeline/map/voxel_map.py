@@ -42,12 +42,10 @@ class VoxelMap:
         self.voxel_size = float(voxel_size)
         self.max_points_per_voxel = int(max_points_per_voxel)
         self.max_distance = float(max_distance)
-        self.version = 0  # counts the changes: what was registered against one version holds for it alone
         self.clear()
 
     def clear(self) -> None:
         """Forget every point."""
-        self.version += 1
         self._n_voxels = 0
         self._n_points = 0
         self._allocate_voxels(1024)
@@ -136,7 +134,6 @@ class VoxelMap:
         self._free_space = None
         self._last_points = (points, sensor)
         self._make_last_scan = scan or (lambda: gicp_cloud(points, self.gicp_voxel))
-        self.version += 1
 
     def snapshot(self) -> VoxelMap:
         """A copy that later updates of this map leave as it is (for a registration on another thread); the last
