@@ -16,7 +16,7 @@ from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 
-from benchmarks.real import Sequence
+from benchmarks.real import Sequence, run_method
 from cemnet_ros.io.console import progress
 
 
@@ -120,12 +120,7 @@ def summary(rows: list[tuple[bool, float, dict[str, float]]]) -> dict:
 def peer_costs(sequence: Sequence, factory: Callable, warmup: int = 10) -> dict:
     """A peer's whole step over ``sequence``: p50 / mean ms over every scan after the first ``warmup`` (a peer
     has no global search to leave out)."""
-    odometry, times = factory(sequence.max_range), []
-    for k, (points, stamp) in enumerate(zip(sequence.scans, sequence.stamps_ns)):
-        start = time.perf_counter()
-        odometry.process(points, stamp)
-        if k >= warmup:
-            times.append(1e3 * (time.perf_counter() - start))
+    times = [step.ms for step in run_method(factory, sequence)[warmup:]]
     return {"scans": len(times), "p50_ms": float(np.median(times)), "mean_ms": float(np.mean(times))}
 
 
