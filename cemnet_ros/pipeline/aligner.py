@@ -16,10 +16,10 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
 5. **commit** the outcome: an accepted step moves the pose, the map, the motion model, the adaptive spread and
    the running level; a failed one is published flagged with the prediction and changes nothing else
    (too many in a row restart the map, where :mod:`.steps.lost_streak` says, and the level with it); a
-   degenerate one keeps the prediction along the unconstrained directions, is flagged, and still extends the map;
-   a near-tie is flagged and moves the pose and the level only; an unconfirmed one (a live scan without time for
-   the search, :mod:`.steps.scan_budget`) is flagged and joins the map unvouched, checked by the search beside
-   the worker (:mod:`.unvouched`). The step's covariance is its
+   degenerate one (a direction barely constrained) is flagged and still extends the map; a near-tie (equals, or
+   the map and its last scan disagree) is flagged and moves the pose and the level only; an unconfirmed one (a
+   live scan without time for the search, :mod:`.steps.scan_budget`) is flagged and joins the map unvouched,
+   checked by the search beside the worker (:mod:`.unvouched`). The step's covariance is its
    registration's plus the previous pose's error against the map (:func:`~.steps.covariance.carried_into_step`).
 
 Pair mode (:mod:`.pair_mode`) runs steps 0-4 against a map of the target cloud. Poses are ``T_odom_sensor``;

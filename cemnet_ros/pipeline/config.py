@@ -112,8 +112,8 @@ class HealthConfig:
     level_memory: float = param(0.9, "running fitness and coverage levels: level <- memory * level + (1 - memory) "
                                 "* the vouched step's", low=0.0, high=0.999)
     min_conditioning: float = param(0.005, "smallest / largest eigenvalue of the polish's normalised Hessian "
-                                    "below which a step is degenerate (flagged, prediction kept along the free "
-                                    "direction)", low=0.0, high=0.99)
+                                    "below which a step is degenerate (flagged; its covariance carries the "
+                                    "prediction's uncertainty along the weak direction)", low=0.0, high=0.99)
     neighbour_conditioning: float = param(0.02, "an accepted step whose conditioning is below this (a weakly "
                                           "constrained view: a narrow field of view down a corridor) is polished "
                                           "again from its rotational neighbours: a neighbour that fits about as "

@@ -361,6 +361,7 @@ def test_corridor_steps_are_flagged_degenerate_and_their_covariance_grows_along_
     later = steps[2:]
     assert all(s.degenerate and not s.accepted and "degenerate" in s.reason for s in later), [s.reason for s in later]
     for s in later:
+        assert s.answer is not None and np.array_equal(s.pose, s.answer)  # where the scan placed it, flagged
         cov = s.covariance
         assert cov[0, 0] > 100 * cov[1, 1], np.diag(cov)
 

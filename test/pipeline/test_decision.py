@@ -30,10 +30,17 @@ def answer(x: float = 0.0, fitness: float = LEVEL, coverage: float = 1.0, condit
 
 
 def evidence(*answers: Answer, level=LEVEL, searched=False, neighbours=False, because="", moving=True,
-             missing="", seen_through=lambda answer: 0.0, reach=np.inf, reviewed=lambda answer: True) -> Evidence:
+             missing="", seen_through=lambda answer: 0.0, reach=np.inf, reviewed=lambda answer: True,
+             review_agrees=lambda answer: True) -> Evidence:
+    """``reviewed``: an answer was polished wide from the map's last scan; ``review_agrees``: that polish landed
+    on it (it then supports it)."""
     running = None if level is None else Level(level, COVERAGE)
     expectation = Expectation(at(0.0), NEAR, running, because, moving, reach)
-    return Evidence.of(list(answers), expectation, RULES, support=lambda a: frozenset({a.origin}),
+
+    def support(a: Answer) -> frozenset[Origin]:
+        return frozenset({a.origin} | ({Origin.LAST_SCAN} if reviewed(a) and review_agrees(a) else set()))
+
+    return Evidence.of(list(answers), expectation, RULES, support=support,
                        seen_through=seen_through, searched=searched, neighbours_checked=neighbours,
                        last_scan_checked=reviewed, missing=missing)
 
@@ -196,3 +203,31 @@ def test_an_answer_that_would_stand_waits_for_the_map_s_last_scan_first_unless_t
     # What the last scan leads to competes: an equal distinct answer makes a near-tie once the search has run.
     elsewhere = answer(x=0.0, yaw_deg=2.0, origin=Origin.LAST_SCAN)
     assert decide(evidence(right, elsewhere, searched=True), RULES).outcome == Outcome.NEAR_TIE
+
+
+def test_an_answer_the_map_s_last_scan_leads_away_from_is_disputed_a_near_tie_after_the_search():
+    right = answer(x=0.3)
+    assert decide(evidence(right), RULES).outcome == Outcome.ACCEPTED  # its review landed on it
+    waiting = decide(evidence(right, review_agrees=lambda a: False), RULES)
+    assert waiting.outcome == Outcome.UNSETTLED and waiting.needs == Needs.SEARCH and "disputed" in waiting.reason
+    # A less consistent answer where the review landed does not tie, yet the map and its last scan disagree.
+    elsewhere = answer(x=0.0, yaw_deg=4.0, fitness=0.4 * LEVEL, origin=Origin.LAST_SCAN)
+    disputed = decide(evidence(right, elsewhere, searched=True, review_agrees=lambda a: a is elsewhere), RULES)
+    assert disputed.outcome == Outcome.NEAR_TIE and "disputed" in disputed.reason and not disputed.failed
+    degenerate = answer(x=0.3, conditioning=RULES.min_conditioning / 2)  # its weak direction lets a review slide
+    assert decide(evidence(degenerate, review_agrees=lambda a: False), RULES).outcome == Outcome.DEGENERATE
+    # a first pair's map is its last scan: the two polishes disagreeing there dispute nothing
+    first = evidence(right, level=None, moving=False, searched=True, review_agrees=lambda a: False)
+    assert decide(first, RULES).outcome == Outcome.ACCEPTED
+
+
+def test_a_first_pair_answer_that_survives_only_because_better_ones_were_seen_through_fails():
+    through = RULES.max_seen_through * LEVEL + 0.01
+    vetoed, survivor = answer(x=0.1, fitness=LEVEL, coverage=1.0), answer(x=4.0, fitness=0.5 * LEVEL, coverage=0.95)
+    first = evidence(vetoed, survivor, level=None, moving=False, searched=True,
+                     seen_through=lambda a: through if a is vetoed else 0.0)
+    assert first.leader is survivor and first.outranked
+    verdict = decide(first, RULES)
+    assert verdict.outcome == Outcome.FAILED and "empty space" in verdict.reason
+    # alone (nothing better seen through) it stands on the search's evidence
+    assert decide(evidence(survivor, level=None, moving=False, searched=True), RULES).outcome == Outcome.ACCEPTED

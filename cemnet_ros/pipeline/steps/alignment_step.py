@@ -40,7 +40,7 @@ class AlignmentStep:
 
     @property
     def degenerate(self) -> bool:
-        """A direction was unconstrained: the prediction was kept along it."""
+        """A direction was weakly constrained: the covariance carries the prediction's uncertainty along it."""
         return self.outcome == Outcome.DEGENERATE.value
 
     @classmethod

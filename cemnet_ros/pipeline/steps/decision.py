@@ -17,10 +17,12 @@ the map's last scan saw empty have not competed (:mod:`.evidence`).
    the global search, whose starts are independent of the prediction; after it an answer stands when it is confirmed,
    or when the prediction expects it and it still overlaps (rule 1). Without a running level (a first pair; a map
    restarted after a lost stretch) nothing is confirmed: the answer stands when the prediction expects it, or, where
-   no motion is known yet (a first pair), when the search found no near-tie; and then at least as much of the scan
-   must lie on the map's surfaces as off the map (consistency >= 0). Where a live scan's budget leaves no time for
-   the search, the registration turns a verdict still waiting for it into *unconfirmed*, or *ambiguous* for equals
-   none next to the prediction (:mod:`.registration`, :mod:`.scan_budget`).
+   no motion is known yet (a first pair), when the search found no near-tie and no more consistent answer that the
+   map's last scan saw through (the survivor of such a veto is no evidence on its own: a car's scan 36 m back along
+   a road); and then at least as much of the scan must lie on the map's surfaces as off the map (consistency >= 0).
+   Where a live scan's budget leaves no time for the search, the registration turns a verdict still waiting for it
+   into *unconfirmed*, or *ambiguous* for equals none next to the prediction (:mod:`.registration`,
+   :mod:`.scan_budget`).
 5. **Displaced**: an answer that stands on that evidence but lies farther from the predicted position than the
    fine polish reaches (along a known motion) waits for its neighbours: its own rotation at the predicted
    position competes. A slide along a weakly constrained direction keeps the right rotation (3-5 m on Livox
@@ -33,9 +35,16 @@ the map's last scan saw empty have not competed (:mod:`.evidence`).
    scan from it, then fine). Where the map has grown from a slid or turned step, its older parts can outvote the
    scan it took in last; from there the polish lands on an answer of its own, which competes (a near-tie, rule 3;
    a clearly more consistent one leads and is judged in turn).
-8. **Degenerate**: an answer whose view leaves a direction unconstrained (conditioning below
-   ``min_conditioning``): flagged, the prediction kept along that direction.
-9. Otherwise: *accepted*.
+8. **Degenerate**: an answer whose view leaves a direction weakly constrained (conditioning below
+   ``min_conditioning``): flagged; its pose is the answer as registered (where the scan's weak pull leaves it: on
+   the corpus nearer the truth along that direction than the prediction on 9 degenerate steps in 10, on keyframes
+   and on a 10 Hz handheld alike), its covariance the prediction's along that direction; the map takes it in.
+9. **Disputed by the last scan**: an answer whose own review (rule 7) lands on a distinct answer: the map and the
+   scan it took in last disagree on it, and the step is judged from that scan. The global search competes first;
+   then the leader is kept as a *near-tie* (flagged, the map does not take it in). Not without a running level
+   (a first pair, a map just restarted): that map is its last scan, and a disagreement there is only GICP's and
+   the point-to-plane polish's on the same scan.
+10. Otherwise: *accepted*.
 """
 from __future__ import annotations
 
@@ -54,8 +63,8 @@ class Outcome(str, enum.Enum):
     """What a scan's registration comes to."""
 
     ACCEPTED = "accepted"  # vouched for: the pose, the map, the motion model and the level take it in
-    DEGENERATE = "degenerate"  # flagged: the prediction kept along the free direction; the map takes it in
-    NEAR_TIE = "near-tie"  # flagged: the answer next to the prediction among equals; the pose and the level move
+    DEGENERATE = "degenerate"  # flagged: a direction weakly constrained; the map takes it in
+    NEAR_TIE = "near-tie"  # flagged: equals, or the map and its last scan disagree; the pose and the level move
     UNCONFIRMED = "unconfirmed"  # flagged: the search it waited for did not fit a live scan's budget; as a near-tie
     AMBIGUOUS = "ambiguous"  # failed: equals, none next to the prediction
     FAILED = "failed"  # the prediction is published, flagged
@@ -137,6 +146,9 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
         if level is None and leader.consistency < 0.0:
             return Verdict(Outcome.FAILED, f"unconfirmed: {why}, more of the scan off the map "
                                            f"({1 - leader.coverage:.3f}) than on its surfaces ({leader.fitness:.3f})")
+        if level is None and not expected.moving and evidence.outranked:
+            return Verdict(Outcome.FAILED, f"unconfirmed: {why}, no motion known, and the search's more consistent "
+                                           "answers put the scan where the map's last scan saw empty space")
     if evidence.displaced and not evidence.neighbours_checked:
         return Verdict(Outcome.UNSETTLED, f"{evidence.offset[0]:.2f} m from the predicted position",
                        Needs.NEIGHBOURS)
@@ -146,6 +158,11 @@ def decide(evidence: Evidence, rules: HealthConfig) -> Verdict:
     if not (leader.explained or evidence.last_scan_checked):
         return Verdict(Outcome.UNSETTLED, "not yet polished from the map's last scan", Needs.LAST_SCAN)
     if degenerate:
-        return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): the motion "
-                                           "prediction kept along the unconstrained direction")
+        return Verdict(Outcome.DEGENERATE, f"degenerate (conditioning {leader.signals.conditioning:.4f}): a "
+                                           "direction the view barely constrains")
+    if level is not None and evidence.disputed:  # no level: nothing has joined the map since its one scan
+        why = "disputed: the map's last scan alone leads from the answer to a distinct one"
+        if not evidence.searched:
+            return Verdict(Outcome.UNSETTLED, why, Needs.SEARCH)
+        return Verdict(Outcome.NEAR_TIE, f"{why}, the map's answer kept")
     return Verdict(Outcome.ACCEPTED)

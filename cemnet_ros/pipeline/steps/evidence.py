@@ -128,6 +128,18 @@ class Evidence:
         return self.expectation.moving and self.offset[0] > self.expectation.reach
 
     @property
+    def outranked(self) -> bool:
+        """An answer more consistent than the leader was dropped: the map's last scan saw through it."""
+        assert self.leader is not None
+        return any(answer.consistency > self.leader.consistency for answer in self.contradicted)
+
+    @property
+    def disputed(self) -> bool:
+        """The leader's own review from the map's last scan led to a distinct answer (the map and the scan it took
+        in last disagree on it)."""
+        return self.last_scan_checked and Origin.LAST_SCAN not in self.support
+
+    @property
     def margin(self) -> float:
         """The consistency the leader leads its rival by (inf: no rival)."""
         if self.leader is None or self.rival is None:

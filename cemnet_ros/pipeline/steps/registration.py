@@ -19,27 +19,25 @@ from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.adaptive import AdaptiveSpread
 from cemnet_ros.pipeline.steps.contest import Contest
-from cemnet_ros.pipeline.steps.covariance import covariance_from_hessian, flat_covariance, keep_prediction_along
+from cemnet_ros.pipeline.steps.covariance import covariance_from_hessian, flat_covariance
 from cemnet_ros.pipeline.steps.decision import Needs, Outcome, Verdict, decide, weak_view
 from cemnet_ros.pipeline.steps.evidence import Evidence
 from cemnet_ros.pipeline.steps.frame import Frame
-from cemnet_ros.pipeline.steps.health import Level, disagreement
+from cemnet_ros.pipeline.steps.health import Level
 from cemnet_ros.pipeline.steps.metric_cem import MetricEngine
 from cemnet_ros.pipeline.steps.polish import Polisher
 from cemnet_ros.pipeline.steps.scan_budget import ScanBudget, StageCosts
 from cemnet_ros.pipeline.steps.starts import Stage, Starts
 
 PREDICTION_SPREADS = 3.0  # an answer within this many tracking spreads of the prediction is the prediction's
-LINEAR_LIMIT = 0.1  # rad: up to this rotation from the prediction a degenerate direction falls back on it
 EARLY = (Outcome.ACCEPTED, Outcome.DEGENERATE)  # end the plan before its end: more starts only add rivals
 
 
 @dataclass(frozen=True)
 class Registered:
     """A frame's registration, before it is committed: the verdict, the evidence it was decided on, the pose a
-    step that is not failed publishes (the leader; degenerate: with the prediction kept along the free
-    directions), its covariance (ROS order; a failed step's inflated by the committer), whether the global search
-    ran and why, and the polishes it cost."""
+    step that is not failed publishes (the leader, as registered), its covariance (ROS order; a failed step's
+    inflated by the committer), whether the global search ran and why, and the polishes it cost."""
 
     verdict: Verdict
     evidence: Evidence
@@ -116,23 +114,19 @@ class Registration:
             else:
                 verdict = Verdict(Outcome.UNCONFIRMED, f"unconfirmed ({verdict.reason}): {left_out}")
         prediction_std = self.config.recovery.radius if contest.searched else translation
-        published = self._published(evidence, verdict, prediction_std, contest.polisher.frame)
+        published = self._published(evidence, prediction_std, contest.polisher.frame)
         return Registered(verdict, evidence, *published, contest.searched, why if contest.searched else "",
                           contest.polishes)
 
-    def _published(self, evidence: Evidence, verdict: Verdict, prediction_std: float, frame: Frame
+    def _published(self, evidence: Evidence, prediction_std: float, frame: Frame
                    ) -> tuple[Optional[np.ndarray], np.ndarray]:
-        """The pose a step that is not failed publishes, and the registration's covariance; the free directions
-        keep the prediction's variance (``prediction_std`` m)."""
+        """The pose a step that is not failed publishes (the leader as registered: along a weakly constrained
+        direction too, where the scan's weak pull lands nearer the truth than the prediction, see
+        :mod:`.decision` rule 8), and the registration's covariance; the free directions keep the prediction's
+        variance (``prediction_std`` m)."""
         leader, rules = evidence.leader, self.config.health
         if leader is None:
             return None, flat_covariance(self.config.preprocess.cem_radius * frame.scale + prediction_std, np.pi)
         covariance = covariance_from_hessian(leader.conditioning, leader.residual_variance, prediction_std ** 2,
                                              rules.min_conditioning)
-        T_published = leader.T_odom_sensor
-        T_predicted = evidence.expectation.T_predicted
-        # The replacement is linear in the difference: a guess degrees away (a search's) would be meaningless.
-        if verdict.outcome == Outcome.DEGENERATE and disagreement(T_predicted, T_published)[1] < LINEAR_LIMIT:
-            T_published = keep_prediction_along(leader.conditioning.degenerate_basis(rules.min_conditioning),
-                                                leader.conditioning.length, T_predicted, T_published)
-        return T_published, covariance
+        return leader.T_odom_sensor, covariance
