@@ -16,7 +16,8 @@ Sequential mode registers each scan against a local map of the recent scans (:cl
 5. **commit** the outcome: an accepted step moves the pose, the map, the motion model, the adaptive spread and
    the running level; a failed one is published flagged with the prediction and changes nothing else
    (too many in a row restart the map, where :mod:`.steps.lost_streak` says, and the level with it); a
-   degenerate one (a direction barely constrained) is flagged and still extends the map; a near-tie (equals, or
+   degenerate one (a direction barely constrained) is flagged and still extends the map (the accepted step that
+   ends a run of them must be seen by the map as last vouched, :mod:`.degenerate_stretch`); a near-tie (equals, or
    the map and its last scan disagree) is flagged and moves the pose and the level only; an unconfirmed one (a
    live scan without time for the search, :mod:`.steps.scan_budget`) is flagged and joins the map unvouched,
    checked by the search beside the worker (:mod:`.unvouched`). The step's covariance is its
@@ -38,6 +39,7 @@ from cemnet_ros.core import Registrar
 from cemnet_ros.core.config import RegistrationConfig
 from cemnet_ros.core.geometry import apply_transform
 from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.degenerate_stretch import DegenerateStretch
 from cemnet_ros.pipeline.map.gicp_cloud import GicpCloud
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.pair_mode import PairMode
@@ -83,6 +85,7 @@ class ScanAligner:
         self._sweep = SweepDeskewer(self.config.preprocess.deskew, self._preprocessor)
         self._pairs = PairMode(self.config, self._preprocessor, self._checks, self._registration)
         self._unvouched = Unvouched()
+        self._stretch = DegenerateStretch()
         preprocess.compile_kernels()  # the first scan must not pay the kernels' compilation
         refine.compile_kernels()
         self.reset()
@@ -193,9 +196,13 @@ class ScanAligner:
 
         registered = plan(self._registration, self._map, effort, budget)
         check = self._check(plan) if registered.verdict.outcome == Outcome.UNCONFIRMED else None
+        registered, untied = self._tied(frame, registered)
         registered = self._held_back(registered)
         step = self._commit(frame, stamp_ns, T_predicted, registered, start, settled)
         step.vouched_late = vouched_late
+        if untied:  # its pose rests on the degenerate steps alone: a new anchor
+            self._restart_map(frame, self._pose)
+            step.map_restarted = True
         if registered.verdict.outcome == Outcome.UNCONFIRMED:
             self._unvouched.add(UnvouchedScan(stamp_ns, frame, self._pose.copy(), check))
         if effort >= 1.0:  # a worker behind its input has no time to spare for a check beside it
@@ -209,6 +216,17 @@ class ScanAligner:
         map_before = self._map.snapshot()
         beside = Registration(self.config, self._registration.engine, copy.deepcopy(self._spread))
         return Check(map_before, self._T_odom_last_insert, lambda: plan(beside, map_before))
+
+    def _tied(self, frame: Frame, registered: Registered) -> tuple[Registered, bool]:
+        """An accepted step that ends a degenerate stretch where the map as last vouched does not see it: flagged
+        degenerate, and whether it is (:mod:`.degenerate_stretch`)."""
+        leader = registered.evidence.leader
+        if registered.verdict.outcome != Outcome.ACCEPTED or leader is None:
+            return registered, False
+        why = self._stretch.untied(self.config, frame, leader.T_odom_sensor, leader.fitness)
+        if not why:
+            return registered, False
+        return dataclasses.replace(registered, verdict=Verdict(Outcome.DEGENERATE, why)), True
 
     def _held_back(self, registered: Registered) -> Registered:
         """An accepted step registered against a map that holds unvouched scans: unconfirmed until they are
@@ -275,6 +293,7 @@ class ScanAligner:
         self._sweep.map_restarted(T_odom_sensor)
         self._level.reset()  # what right answers fit depends on the scene: the new map's steps set it again
         self._unvouched.clear()
+        self._stretch.clear()
         self._pending_recovery = ""
         self._failures_in_a_row = 0
         self._lost.reset()
@@ -343,6 +362,10 @@ class ScanAligner:
             return
         if not registered.searched:  # a search's guess was no prediction of the motion model
             self._spread.update(np.linalg.inv(T_predicted) @ pose)
+        if registered.verdict.outcome == Outcome.DEGENERATE:
+            self._stretch.entering(self._map)
+        elif registered.verdict.vouched:
+            self._stretch.clear()
         self._insert(frame, pose)
         self._sweep.inserted(pose)
 

@@ -119,6 +119,9 @@ class HealthConfig:
                                           "again from its rotational neighbours: a neighbour that fits about as "
                                           "well flags it, one that fits clearly better replaces it; 0 = never",
                                           low=0.0, high=1.0)
+    min_vouched_share: float = param(0.1, "the step that ends a run of degenerate steps is vouched only where at "
+                                     "least this share of its fitness lies on the map as last vouched (before the "
+                                     "run); otherwise it is flagged and the map restarts from it", low=0.0, high=1.0)
     covariance_inflation: float = param(100.0, "variance factor of a failed step's covariance", low=1.0)
 
     def __post_init__(self) -> None:
