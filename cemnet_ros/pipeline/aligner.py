@@ -204,7 +204,8 @@ class ScanAligner:
             self._restart_map(frame, self._pose)
             step.map_restarted = True
         if registered.verdict.outcome == Outcome.UNCONFIRMED:
-            self._unvouched.add(UnvouchedScan(stamp_ns, frame, self._pose.copy(), check))
+            owed = check is not None and bool(why) and not registered.searched
+            self._unvouched.add(UnvouchedScan(stamp_ns, frame, self._pose.copy(), check, owed))
         if effort >= 1.0:  # a worker behind its input has no time to spare for a check beside it
             self._unvouched.start_check()
         return step

@@ -12,7 +12,10 @@ turn); a check
 - **confirms** the scan (its plan stands within the node's precision of the answer taken in): the scan is
   vouched for, and so are those after it up to the next one unconfirmed on its own evidence (they stood on their
   own evidence against a map whose every scan is now vouched for); the node then vouches for these steps late
-  (:attr:`~.steps.alignment_step.AlignmentStep.vouched_late`), and the next one's check starts;
+  (:attr:`~.steps.alignment_step.AlignmentStep.vouched_late`), and the next one's check starts. Where the scan
+  *owed* the search (the step before it failed, or a check failed and the map went back) and had no time for it,
+  the steps after it stood without the search they would have run offline, on a map the node had just lost or
+  rolled back: the check vouches for the scan alone, and those steps stay flagged (the map keeps them);
 - or **places it elsewhere** (a standing answer distinct from it): the map goes back to what it was before the
   scan, takes the scan in where the check placed it, and the current pose moves by the same correction (the
   motion since kept);
@@ -53,6 +56,7 @@ class UnvouchedScan:
     frame: Frame
     T_inserted: np.ndarray
     check: Optional[Check]
+    owed_search: bool = False  # the scan owed the global search (:attr:`Check`) and had no time for it
 
 
 class Unvouched:
@@ -94,12 +98,13 @@ class Unvouched:
 
     def vouched(self, scan: UnvouchedScan) -> list[int]:
         """``scan`` is confirmed: it, the scans before it, and those after it that have no check of their own
-        leave; their stamps."""
+        leave; the stamps vouched for (not those after a scan that owed the search, see the module)."""
         count = self._scans.index(scan) + 1
+        confirmed = count
         while count < len(self._scans) and self._scans[count].check is None:
             count += 1
         left, self._scans = self._scans[:count], self._scans[count:]
-        return [s.stamp_ns for s in left]
+        return [s.stamp_ns for s in left[:confirmed if scan.owed_search else count]]
 
     def clear(self) -> None:
         """None is left (the map went back, or restarted); a running check's result is dropped."""

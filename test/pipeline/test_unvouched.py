@@ -59,6 +59,18 @@ def test_checks_run_oldest_first_and_a_confirmation_vouches_up_to_the_next_scan_
     assert unvouched.vouched(third) == [3, 4] and len(unvouched) == 0
 
 
+def test_a_scan_that_owed_the_search_vouches_for_itself_alone_and_its_followers_leave_flagged():
+    unvouched = Unvouched()
+    owed = UnvouchedScan(1, None, np.eye(4), Check(VoxelMap(1.0), None, lambda: "one"), owed_search=True)
+    unvouched.add(owed)
+    unvouched.add(scan(2))  # stood on its own evidence, without the search the scan before it owed
+    unvouched.add(scan(3, lambda: "three"))
+    unvouched.start_check()
+    first, _ = finished(unvouched)
+    assert unvouched.vouched(first) == [1]
+    assert len(unvouched) == 1 and unvouched.oldest.stamp_ns == 3  # scan 2 left the list, not vouched for
+
+
 def test_the_first_unvouched_scan_is_one_with_a_check_of_its_own():
     with pytest.raises(AssertionError):
         Unvouched().add(scan(1))
