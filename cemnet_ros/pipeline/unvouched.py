@@ -56,7 +56,7 @@ class UnvouchedScan:
     frame: Frame
     T_inserted: np.ndarray
     check: Optional[Check]
-    owed_search: bool = False  # the scan owed the global search (:attr:`Check`) and had no time for it
+    owed_search: bool = False  # the scan owed the global search (a failed step or check before it), had no time
 
 
 class Unvouched:
