@@ -18,6 +18,7 @@ import numpy as np
 
 from cemnet_ros.pipeline.config import AlignerConfig
 from cemnet_ros.pipeline.map.voxel_map import VoxelMap
+from cemnet_ros.pipeline.steps.answer import fit_and_cover
 from cemnet_ros.pipeline.steps.frame import Frame
 
 
@@ -41,9 +42,7 @@ class DegenerateStretch:
         stretch runs)."""
         if self._map_vouched is None or fitness <= 0.0:
             return ""
-        vouched_fitness, _ = self._map_vouched.overlap(
-            frame.polish, T_odom_sensor, config.polish.inlier_distance * frame.polish_voxel,
-            config.polish.inlier_residual, config.health.coverage_distance * frame.polish_voxel)
+        vouched_fitness, _ = fit_and_cover(config, frame, self._map_vouched, T_odom_sensor)
         share, least = vouched_fitness / fitness, config.health.min_vouched_share
         if share >= least:
             return ""

@@ -21,7 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cemnet_ros.pipeline.config import AlignerConfig
+from cemnet_ros.pipeline.map.voxel_map import VoxelMap
 from cemnet_ros.pipeline.steps.covariance import Conditioning
+from cemnet_ros.pipeline.steps.frame import Frame
 from cemnet_ros.pipeline.steps.health import Signals, disagreement
 from cemnet_ros.pipeline.steps.polish import Polisher
 from cemnet_ros.pipeline.steps.refine import PolishResult
@@ -78,15 +81,21 @@ class Answer:
         return self.n_pairs >= MIN_POLISH_PAIRS
 
 
+def fit_and_cover(config: AlignerConfig, frame: Frame, target_map: VoxelMap, T_odom_sensor: np.ndarray
+                  ) -> tuple[float, float]:
+    """The fitness and coverage of ``frame`` placed at ``T_odom_sensor`` against ``target_map``, as every answer
+    is measured."""
+    return target_map.overlap(frame.polish, T_odom_sensor, config.polish.inlier_distance * frame.polish_voxel,
+                              config.polish.inlier_residual, config.health.coverage_distance * frame.polish_voxel)
+
+
 def measured(polisher: Polisher, T_start: np.ndarray, polish: PolishResult, origin: Origin,
              T_predicted: np.ndarray, spread_m: float = 0.0) -> Answer:
     """The answer ``polish`` gives from ``T_start`` (``spread_m``: the CEM's final spread where the CEM gave the
     start, a recorded signal)."""
-    frame, config = polisher.frame, polisher.config
+    frame = polisher.frame
     T_final = polish.T_target_source
-    fitness, coverage = polisher.map.overlap(frame.polish, T_final, config.polish.inlier_distance * frame.polish_voxel,
-                                             config.polish.inlier_residual,
-                                             config.health.coverage_distance * frame.polish_voxel)
+    fitness, coverage = fit_and_cover(polisher.config, frame, polisher.map, T_final)
     conditioning = Conditioning.of(polish.hessian, frame.length)
     moved_m, moved_rad = disagreement(T_start, T_final)
     signals = Signals(fitness, moved_m, moved_rad, conditioning.ratio, spread_m, coverage)
