@@ -201,7 +201,7 @@ def live_stop_in_a_gap(aligner, rng, scans):
 def wait_for_the_check(aligner, timeout_s=120.0):
     """Until the check beside the worker has ended (the next scan takes it in)."""
     deadline = time.monotonic() + timeout_s
-    while not aligner._unvouched._side._running[1].done():
+    while not aligner._trajectory._unvouched._side._running[1].done():
         assert time.monotonic() < deadline, "the check beside the worker did not end"
         time.sleep(0.01)
 
@@ -216,7 +216,8 @@ def test_a_live_scan_without_time_for_the_search_is_unconfirmed_joins_the_map_an
     assert unconfirmed.outcome == "unconfirmed" and not unconfirmed.accepted and not unconfirmed.recovered
     assert "does not fit the scan's budget" in unconfirmed.reason, unconfirmed.reason
     assert within(*step_error(STOP_POSES, steps, 3), 0.03, 0.15)  # the answer is published (flagged)
-    assert len(aligner.local_map) > map_size and aligner._unvouched._side.busy  # in the map, unvouched, checked
+    assert len(aligner.local_map) > map_size  # in the map, unvouched, checked beside the worker
+    assert aligner._trajectory._unvouched._side.busy
     wait_for_the_check(aligner)
     steps += live_stop_in_a_gap(aligner, rng, [4])
     assert "confirmed by the search beside the worker" in steps[4].reason, steps[4].reason
@@ -231,7 +232,7 @@ def test_a_live_scan_without_time_for_the_search_is_unconfirmed_joins_the_map_an
 def test_a_step_registered_while_the_map_holds_an_unvouched_scan_is_flagged_until_the_check_settles():
     aligner, rng = ScanAligner(DEFAULT), np.random.default_rng(2)
     steps = live_stop_in_a_gap(aligner, rng, range(4))
-    aligner._unvouched.finished = lambda: None  # the check has not ended yet
+    aligner._trajectory._unvouched.finished = lambda: None  # the check has not ended yet
     held = live_stop_in_a_gap(aligner, rng, [4])[0]
     assert steps[3].outcome == "unconfirmed" and held.outcome == "unconfirmed" and not held.accepted
     assert "the map holds 1 scans the search has yet to vouch for" in held.reason, held.reason
@@ -245,23 +246,25 @@ def test_a_check_that_does_not_confirm_takes_the_map_back_to_the_one_last_vouche
     vouched_size = len(aligner.local_map)
     live_stop_in_a_gap(aligner, rng, [3])
     wait_for_the_check(aligner)
-    scan, checked = aligner._unvouched.finished()
+    scan, checked = aligner._trajectory._unvouched.finished()
     shift = make_transform(t=(0.4, 0.0, 0.0))
     if placed_elsewhere:  # the check's answer stands 0.4 m from the one taken in
         checked = dataclasses.replace(checked, T_odom_sensor=shift @ scan.T_inserted)
     else:
         checked = dataclasses.replace(checked, verdict=Verdict(Outcome.FAILED, "no answer stands"))
-    aligner._unvouched.finished = lambda: (scan, checked)
+    aligner._trajectory._unvouched.finished = lambda: (scan, checked)
     pose_before = aligner.pose
-    note, vouched = aligner._settle_check()
+    note, vouched = aligner._trajectory.settle_check()
     assert "the map goes back to the one last vouched for" in note and vouched == [], note
-    if placed_elsewhere:  # the scan went in where the check placed it; the pose moved by the same correction
+    if placed_elsewhere:  # the scan went in where the check placed it; the pose moved by the same correction;
+        # the steps since stood on a map rolled back: the next scan runs the search
         assert "placed the step" in note and len(aligner.local_map) > vouched_size
         np.testing.assert_allclose(aligner.pose, shift @ pose_before, atol=1e-9)
+        assert aligner._trajectory.pending_recovery.startswith("the search beside the worker placed")
     else:  # the map the node last vouched for, unchanged; the next scan runs the search
         assert len(aligner.local_map) == vouched_size
         np.testing.assert_array_equal(aligner.pose, pose_before)
-        assert aligner._pending_recovery.startswith("the search beside the worker did not confirm")
+        assert aligner._trajectory.pending_recovery.startswith("the search beside the worker did not confirm")
 
 
 def test_a_car_that_keeps_its_speed_through_a_gap_of_a_second_is_tracked_from_the_prediction():

@@ -21,21 +21,27 @@ from cemnet_ros.pipeline.steps.motion import ConstantVelocity
 
 
 class LostStreak:
-    """The registered answers of the failed steps in a row."""
+    """The failed steps in a row, and their registered answers."""
 
     def __init__(self) -> None:
         self._motion = ConstantVelocity()
-        self._steady: Optional[np.ndarray] = None  # the last answer, when the ones before it predicted it
+        self.reset()
 
     def reset(self) -> None:
         """A good step, or a restarted map: no streak."""
+        self.failures = 0
+        self._forget_answers()
+
+    def _forget_answers(self) -> None:
         self._motion.reset()
-        self._steady = None
+        self._steady: Optional[np.ndarray] = None  # the last answer, when the ones before it predicted it
 
     def failed(self, T_answer: Optional[np.ndarray], stamp_ns: int) -> None:
-        """Record a failed step's registered answer (None: it has none worth keeping, e.g. no overlap)."""
+        """Count a failed step and record its registered answer (None: it has none worth keeping, e.g. no
+        overlap)."""
+        self.failures += 1
         if T_answer is None:
-            self.reset()
+            self._forget_answers()
             return
         predicted = self._motion.predict(stamp_ns) if self._motion.has_velocity else None
         self._steady = T_answer if predicted is not None and not distinct(predicted, T_answer) else None

@@ -3,7 +3,9 @@
 The last relative motion is rescaled to the new time step through the SE(3) logarithm, so a dropped scan
 (twice the usual gap) predicts twice the motion, and a gap of a second at 10 Hz ten times it: a car keeps its
 speed through a gap more often than not, and where it stopped tracking's start from the last pose finds it
-(:mod:`.tracking`). The model also owns the time: its last stamp, the usual time step (a running mean) that
+(:mod:`.tracking`). A map restarted on a pose the node did not vouch for keeps the motion of the last vouched
+step (:meth:`ConstantVelocity.restart_at`): no motion, or the motion into a guess, is a hypothesis, not a fact.
+The model also owns the time: its last stamp, the usual time step (a running mean) that
 widens the tracking's search after a longer one, and the velocity that deskews.
 """
 from __future__ import annotations
@@ -35,6 +37,7 @@ class ConstantVelocity:
         self._poses: list[np.ndarray] = []
         self._stamps: list[int] = []
         self._period_ns: Optional[int] = None
+        self._vouched_motion: Optional[tuple[np.ndarray, int]] = None  # the last vouched step's motion, time step
 
     @property
     def has_velocity(self) -> bool:
@@ -54,14 +57,27 @@ class ConstantVelocity:
         """The usual time step: the running mean of the recorded ones (None before two poses)."""
         return self._period_ns
 
-    def update(self, pose: np.ndarray, stamp_ns: int) -> None:
+    def update(self, pose: np.ndarray, stamp_ns: int, vouched: bool = True) -> None:
         """Record the pose estimated at ``stamp_ns`` (only the last two are kept); its time step joins the usual
-        one."""
+        one. ``vouched``: the node vouched for the step to it (a restart keeps its motion, :meth:`restart_at`)."""
         if self._stamps:
             dt_ns = int(stamp_ns) - self._stamps[-1]
             self._period_ns = dt_ns if self._period_ns is None else int(0.9 * self._period_ns + 0.1 * dt_ns)
         self._poses = (self._poses + [np.array(pose, dtype=np.float64)])[-2:]
         self._stamps = (self._stamps + [int(stamp_ns)])[-2:]
+        if vouched and self.has_velocity and self._stamps[1] > self._stamps[0]:
+            self._vouched_motion = (np.linalg.inv(self._poses[0]) @ self._poses[1], self._stamps[1] - self._stamps[0])
+
+    def restart_at(self, pose: np.ndarray, stamp_ns: int) -> None:
+        """Record ``pose`` at ``stamp_ns`` as an anchor the node did not vouch for (a restarted map's): the motion
+        into it is the last vouched step's (none vouched yet: no velocity)."""
+        self.update(pose, stamp_ns, vouched=False)
+        if self._vouched_motion is None:
+            self._poses, self._stamps = self._poses[-1:], self._stamps[-1:]
+            return
+        motion, dt_ns = self._vouched_motion
+        self._poses = [self._poses[-1] @ np.linalg.inv(motion), self._poses[-1]]
+        self._stamps = [self._stamps[-1] - dt_ns, self._stamps[-1]]
 
     def moved(self, T_correction: np.ndarray) -> None:
         """The recorded poses moved by ``T_correction`` (odom frame, from the left): the motion between them kept."""
