@@ -13,9 +13,9 @@ turn); a check
   vouched for, and so are those after it up to the next one unconfirmed on its own evidence (they stood on their
   own evidence against a map whose every scan is now vouched for); the node then vouches for these steps late
   (:attr:`~.steps.alignment_step.AlignmentStep.vouched_late`), and the next one's check starts. Where the scan
-  *owed* the search (the step before it failed, or a check did not confirm a scan and the map went back) and had no time for it,
-  the steps after it stood without the search they would have run offline, on a map the node had just lost or
-  rolled back: the check vouches for the scan alone, and those steps stay flagged (the map keeps them);
+  *owed* the search (the step before it failed, or a check took the map back) and had no time for it, the steps
+  after it stood without the search they would have run offline, on a map the node had just lost or rolled back:
+  the check vouches for the scan alone, and those steps stay flagged (the map keeps them);
 - or **places it elsewhere** (a standing answer distinct from it): the map goes back to what it was before the
   scan, takes the scan in where the check placed it, and the current pose moves by the same correction (the
   motion since kept); the steps since stood on a map the node no longer holds, so the next scan runs the search;
