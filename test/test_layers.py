@@ -18,6 +18,7 @@ LAYERS = [
     ("cemnet_ros.pipeline.map",),
     ("cemnet_ros.pipeline.steps",),
     ("cemnet_ros.pipeline.side_search", "cemnet_ros.pipeline.unvouched", "cemnet_ros.pipeline.degenerate_stretch"),
+    ("cemnet_ros.pipeline.trajectory",),
     ("cemnet_ros.pipeline.aligner", "cemnet_ros.pipeline.pair_mode"),
     ("cemnet_ros.runtime",),
     ("cemnet_ros",),
