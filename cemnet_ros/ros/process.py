@@ -31,10 +31,10 @@ def run(make_node: Callable[[], Any], name: str, args: Optional[list] = None,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if node is not None or rclpy.ok():
+        if rclpy.ok():
             raise
-        # A Ctrl-C between rclpy.init and a made node: rclpy's handler shut the context down, so making the node
-        # failed ("the given context is not valid"). Nothing was started: it ends as a Ctrl-C does.
+        # A SIGINT or SIGTERM while the node was being made or spun: rclpy's handler shut the context down, so
+        # what ran then failed ("the given context is not valid"). It ends as a Ctrl-C does.
     finally:
         _ignore_interrupts()
         if node is not None:

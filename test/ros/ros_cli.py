@@ -14,10 +14,16 @@ from node_harness import wait_for
 
 
 def start(command: list, env: dict) -> tuple[subprocess.Popen, "Output"]:
-    """``command`` in its own process group (a terminal's job), stdout and stderr together."""
+    """``command`` in its own process group (a terminal's job), stdout and stderr together, with Ctrl-C's default
+    disposition (a test suite started in the background of a script inherits SIGINT ignored, which a terminal's
+    job does not)."""
     process = subprocess.Popen(command, env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               start_new_session=True)
+                               start_new_session=True, preexec_fn=_terminal_signals)
     return process, Output(process)
+
+
+def _terminal_signals() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def interrupt(process: subprocess.Popen, timeout: float = 60.0) -> None:

@@ -43,29 +43,44 @@ def test_sigint_while_the_console_script_still_imports_ends_it_with_status_0_and
 MAKE_NODE_AFTER_SIGINT = """
 import sys
 import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from cemnet_ros.ros.process import run
+
+class SignalledWhileSpinning(SingleThreadedExecutor):
+    def spin_once(self, timeout_sec=None):
+        rclpy.try_shutdown()  # a SIGTERM's handler, between the loop's check and the wait
+        super().spin_once(timeout_sec=timeout_sec)  # raises: the context is no longer valid
 
 def make_node():
     if sys.argv[1] == "interrupted":
         rclpy.try_shutdown()  # what rclpy's SIGINT handler does to the context
         return Node("made_after_sigint")  # raises: the context is no longer valid
+    if sys.argv[1] == "spinning":
+        node = Node("signalled_while_spinning")
+        node.fatal_error = None
+        return node
     raise RuntimeError("a real failure while making the node")
 
-run(make_node, "probe")
+run(make_node, "probe", executor=SignalledWhileSpinning)
 print("ended")
 """
 
 
 @pytest.mark.dds
-def test_sigint_between_init_and_the_made_node_ends_it_with_status_0_and_a_real_error_still_raises():
-    """A Ctrl-C after rclpy.init but before the node exists (rclpy's handler shuts the context down, so making
-    the node fails): status 0, no traceback. The same failure with the context still valid is a real error."""
+def test_a_signal_while_the_node_is_made_or_spins_ends_it_with_status_0_and_a_real_error_still_raises():
+    """A Ctrl-C after rclpy.init but before the node exists, or a signal while it spins (rclpy's handler shuts the
+    context down, so making the node or its wait fails): status 0, no traceback. The same failure with the context
+    still valid is a real error."""
     env = {**os.environ, "ROS_DOMAIN_ID": "229", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     interrupted = subprocess.run([sys.executable, "-c", MAKE_NODE_AFTER_SIGINT, "interrupted"], env=env,
                                  capture_output=True, text=True, timeout=60)
     assert interrupted.returncode == 0 and "Traceback" not in interrupted.stderr, interrupted.stderr
     assert interrupted.stdout.strip() == "ended"
+    spinning = subprocess.run([sys.executable, "-c", MAKE_NODE_AFTER_SIGINT, "spinning"], env=env,
+                              capture_output=True, text=True, timeout=60)
+    assert spinning.returncode == 0 and "Traceback" not in spinning.stderr, spinning.stderr
+    assert spinning.stdout.strip() == "ended"
     failing = subprocess.run([sys.executable, "-c", MAKE_NODE_AFTER_SIGINT, "failing"], env=env,
                              capture_output=True, text=True, timeout=60)
     assert failing.returncode != 0 and "a real failure while making the node" in failing.stderr
