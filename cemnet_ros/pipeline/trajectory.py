@@ -116,7 +116,7 @@ class Trajectory:
         if restarted:
             self.motion.restart_at(pose, stamp_ns)
         else:
-            self.motion.update(pose, stamp_ns, vouched=registered.verdict.vouched)
+            self.motion.update(pose, stamp_ns, vouched=verdict.vouched)
         if verdict.outcome == Outcome.UNCONFIRMED:
             self._unvouched.add(UnvouchedScan(stamp_ns, frame, pose.copy(), check, owed_search))
         return AlignmentStep.registered(

@@ -1,5 +1,5 @@
 """The step that ends a run of degenerate steps is tied to the last vouched pose only through the map as last vouched
-(pipeline/degenerate_stretch.py, its wiring in pipeline/aligner.py)."""
+(pipeline/degenerate_stretch.py, its wiring in pipeline/trajectory.py)."""
 from __future__ import annotations
 
 import dataclasses
